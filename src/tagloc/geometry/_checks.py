@@ -1,0 +1,114 @@
+"""Input validation for the public ``from_*`` paths and array helpers shared by the geometry types.
+
+Internal code builds values with the private fast constructors and never comes through here; only
+data that enters from outside (user arrays, files, messages) is checked, once.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TypeAlias
+
+import numpy as np
+import numpy.typing as npt
+
+from tagloc.errors import GeometryError
+
+FloatArray: TypeAlias = npt.NDArray[np.float64]
+
+#: Largest accepted ``max |R^T R - I|`` for a rotation matrix handed in from outside.
+ORTHONORMAL_TOL = 1e-6
+#: Largest accepted ``| |q| - 1 |`` for a quaternion handed in from outside.
+UNIT_QUAT_TOL = 1e-6
+
+
+def readonly(array: FloatArray) -> FloatArray:
+    """Mark ``array`` read-only in place and return it (no copy)."""
+    array.flags.writeable = False
+    return array
+
+
+def to_float_array(value: npt.ArrayLike, name: str) -> FloatArray:
+    """``value`` as a float64 array, or :class:`GeometryError` naming ``name``."""
+    try:
+        return np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise GeometryError(f"{name}: cannot be read as a float array ({exc})") from exc
+
+
+def check_finite(array: FloatArray, name: str) -> None:
+    """Raise :class:`GeometryError` if ``array`` holds a NaN or an infinity."""
+    if array.size <= 16:  # plain floats beat a numpy reduction on tiny arrays
+        finite = all(map(math.isfinite, array.ravel().tolist()))
+    else:
+        finite = bool(np.isfinite(array).all())
+    if not finite:
+        bad = "NaN" if np.isnan(array).any() else "inf"
+        raise GeometryError(f"{name} contains {bad}: {array!r}")
+
+
+def vectors(value: npt.ArrayLike, dim: int, name: str) -> FloatArray:
+    """A finite ``(dim,)`` or ``(N, dim)`` float array (a fresh copy the caller may own).
+
+    Raises
+    ------
+    GeometryError
+        On a wrong shape, NaN or infinity.
+    """
+    array = np.array(to_float_array(value, name), dtype=np.float64)
+    if array.ndim not in (1, 2) or array.shape[-1] != dim:
+        raise GeometryError(f"{name} must have shape ({dim},) or (N, {dim}), got {array.shape}")
+    check_finite(array, name)
+    return array
+
+
+def matrices(value: npt.ArrayLike, dim: int, name: str) -> FloatArray:
+    """A finite ``(dim, dim)`` or ``(N, dim, dim)`` float array (a fresh copy).
+
+    Raises
+    ------
+    GeometryError
+        On a wrong shape, NaN or infinity.
+    """
+    array = np.array(to_float_array(value, name), dtype=np.float64)
+    if array.ndim not in (2, 3) or array.shape[-2:] != (dim, dim):
+        raise GeometryError(
+            f"{name} must have shape ({dim}, {dim}) or (N, {dim}, {dim}), got {array.shape}"
+        )
+    check_finite(array, name)
+    return array
+
+
+def check_rotation_matrices(matrix: FloatArray, name: str) -> None:
+    """Raise :class:`GeometryError` unless every ``(..., 3, 3)`` block is a proper rotation.
+
+    A matrix passes when ``max |R^T R - I| <= ORTHONORMAL_TOL`` and ``det R > 0``.
+    """
+    gram = np.swapaxes(matrix, -1, -2) @ matrix
+    error = np.abs(gram - np.eye(3)).max(axis=(-1, -2))
+    worst = int(np.argmax(error)) if error.ndim else 0
+    if np.max(error) > ORTHONORMAL_TOL:
+        where = f" (pose {worst})" if error.ndim else ""
+        raise GeometryError(
+            f"{name} is not orthonormal{where}: max |R^T R - I| = {np.max(error):.3g} "
+            f"> {ORTHONORMAL_TOL:g}; pass normalize=True to project it onto SO(3)"
+        )
+    det = np.linalg.det(matrix)
+    if np.any(det <= 0.0):
+        raise GeometryError(f"{name} is a reflection, not a rotation (det = {np.min(det):.3g})")
+
+
+def check_points(points: npt.ArrayLike, dim: int, name: str = "points") -> FloatArray:
+    """``points`` as a float array whose last axis has length ``dim`` (no copy, no NaN check)."""
+    array = to_float_array(points, name)
+    if array.ndim == 0 or array.shape[-1] != dim:
+        raise GeometryError(f"{name} must have shape ({dim},) or (N, {dim}), got {array.shape}")
+    return array
+
+
+def broadcast_jacobian(jacobian: FloatArray, batch_shape: tuple[int, ...]) -> FloatArray:
+    """``jacobian`` (``(..., r, c)``) broadcast to ``batch_shape + (r, c)`` as a writable copy."""
+    target = batch_shape + jacobian.shape[-2:]
+    if jacobian.shape == target:
+        return jacobian
+    return np.array(np.broadcast_to(jacobian, target))
