@@ -1,0 +1,43 @@
+"""Simulation: world files, ground-truth trajectories, odometry drift models and drives.
+
+>>> from tagloc.sim import load_default_world, simulate_drive
+>>> drive = simulate_drive(load_default_world(), seed=1)  # doctest: +SKIP
+"""
+
+from tagloc.sim.drive import Drive, simulate_drive
+from tagloc.sim.odometry import (
+    ODOMETRY_MODELS,
+    DriftParameters,
+    LeggedOdometryConfig,
+    WheelOdometryConfig,
+    simulate_odometry,
+)
+from tagloc.sim.trajectory import (
+    RouteConfig,
+    RoutePlan,
+    Trajectory,
+    generate_trajectory,
+    plan_from_config,
+    plan_route,
+)
+from tagloc.sim.world import Tag, World, load_default_world, load_world
+
+__all__ = [
+    "ODOMETRY_MODELS",
+    "DriftParameters",
+    "Drive",
+    "LeggedOdometryConfig",
+    "RouteConfig",
+    "RoutePlan",
+    "Tag",
+    "Trajectory",
+    "WheelOdometryConfig",
+    "World",
+    "generate_trajectory",
+    "load_default_world",
+    "load_world",
+    "plan_from_config",
+    "plan_route",
+    "simulate_drive",
+    "simulate_odometry",
+]

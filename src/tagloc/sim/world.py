@@ -1,0 +1,498 @@
+"""World files: a simulated building (walls, tags, elevator cab, checkpoints, route) and its robot.
+
+A world is a YAML file (``version: 1``) validated by the pydantic models below (unknown keys are
+errors). Every failure becomes one :class:`~tagloc.errors.ConfigError` line naming the file and the
+field path, e.g. ``world.yaml: tags[3].size: field required``. The built-in example,
+``tagloc/sim/worlds/office.yaml`` (:func:`load_default_world`), documents every field in comments.
+
+Frames: ``map`` (z up, floor at z = 0) and ``elevator_cab`` (origin at the centre of the cab floor,
+z up, its pose in ``map`` given by ``elevator.pose_in_map``). A tag frame has its origin at the tag
+centre, z out of the printed face towards a viewer, x to the viewer's right, y up (for a tag on a
+wall); ``size`` is the black-border edge in metres.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from importlib import resources
+from typing import Literal
+
+import numpy as np
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from tagloc.errors import ConfigError, SimulationError
+from tagloc.geometry import SE3, SO3
+from tagloc.sim.odometry import ODOMETRY_MODELS, OdometryConfig
+from tagloc.sim.trajectory import RouteConfig
+
+Vec2 = tuple[float, float]
+Vec3 = tuple[float, float, float]
+UNIT_QUAT_TOL = 1e-6
+#: Codes per AprilTag family: valid ids are ``0 .. n - 1``.
+TAG_FAMILY_SIZES = {
+    "tag36h11": 587,
+    "tag25h9": 35,
+    "tag16h5": 30,
+    "tagCircle21h7": 38,
+    "tagCircle49h12": 65535,
+    "tagStandard41h12": 2115,
+    "tagStandard52h13": 48714,
+    "tagCustom48h12": 42211,
+}
+TagFamily = Literal[
+    "tag36h11",
+    "tag25h9",
+    "tag16h5",
+    "tagCircle21h7",
+    "tagCircle49h12",
+    "tagStandard41h12",
+    "tagStandard52h13",
+    "tagCustom48h12",
+]
+#: Camera body (x forward, y left, z up) to OpenCV optical frame (x right, y down, z forward).
+R_BODY_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+
+
+class FieldPathError(ValueError):
+    """A validation failure at ``path`` below the model whose validator raised it."""
+
+    def __init__(self, path: tuple[str | int, ...], message: str) -> None:
+        super().__init__(message)
+        self.path = path
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+
+def _unit_quat(quat_xyzw: tuple[float, float, float, float]) -> tuple[float, float, float, float]:
+    norm = math.sqrt(sum(c * c for c in quat_xyzw))
+    if abs(norm - 1.0) > UNIT_QUAT_TOL:
+        raise ValueError(
+            f"not a unit quaternion: |q| = {norm:.9g} (tolerance {UNIT_QUAT_TOL:g}); "
+            "write it normalized"
+        )
+    return quat_xyzw
+
+
+def _yaw_matrix(yaw: float) -> np.ndarray:
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+class Wall(_Model):
+    """A vertical wall: the segment ``start -> end`` on the floor (m), ``height`` (m)."""
+
+    start: Vec2
+    end: Vec2
+    material: Literal["wall", "glass", "mirror"] = "wall"
+    height: float = Field(default=2.5, gt=0.0, le=20.0)
+
+    @model_validator(mode="after")
+    def _not_degenerate(self) -> Wall:
+        if math.dist(self.start, self.end) < 1e-6:
+            raise FieldPathError(("end",), "wall has zero length (end == start)")
+        return self
+
+
+class TagPose(_Model):
+    """Full pose of a tag in its frame: ``position`` (m) and unit ``quat_xyzw``."""
+
+    position: Vec3
+    quat_xyzw: tuple[float, float, float, float]
+
+    @field_validator("quat_xyzw")
+    @classmethod
+    def _check_quat(
+        cls, value: tuple[float, float, float, float]
+    ) -> tuple[float, float, float, float]:
+        return _unit_quat(value)
+
+
+class WallMount(_Model):
+    """Upright tag on a wall: centre ``(x, y, height)``, horizontal face normal at ``yaw_deg``."""
+
+    x: float
+    y: float
+    yaw_deg: float = Field(ge=-360.0, le=360.0)
+    height: float = Field(gt=0.0, le=20.0)
+
+
+class Tag(_Model):
+    """One tag: exactly one of ``pose`` or ``wall``, in ``frame`` (``map`` or ``elevator_cab``)."""
+
+    id: int = Field(ge=0)
+    family: TagFamily = "tag36h11"
+    size: float = Field(gt=0.0, le=5.0)
+    pose: TagPose | None = None
+    wall: WallMount | None = None
+    frame: Literal["map", "elevator_cab"] = "map"
+    note: str | None = None
+
+    @model_validator(mode="after")
+    def _check(self) -> Tag:
+        if (self.pose is None) == (self.wall is None):
+            raise ValueError("give exactly one of 'pose' or 'wall'")
+        if self.id >= TAG_FAMILY_SIZES[self.family]:
+            raise FieldPathError(
+                ("id",),
+                f"id {self.id} is out of range for {self.family} "
+                f"(0..{TAG_FAMILY_SIZES[self.family] - 1})",
+            )
+        return self
+
+    def T_frame_tag(self) -> SE3:
+        """Pose of the tag in its own ``frame`` (``map`` or ``elevator_cab``).
+
+        For ``wall: {x, y, yaw_deg, height}`` the tag axes in the frame are
+        ``z = (cos yaw, sin yaw, 0)`` (face normal), ``y = (0, 0, 1)`` (up),
+        ``x = y cross z = (-sin yaw, cos yaw, 0)`` (right as seen by a viewer facing the tag).
+        """
+        if self.pose is not None:
+            return SE3.from_quat(self.pose.quat_xyzw, self.pose.position)
+        assert self.wall is not None
+        c, s = math.cos(math.radians(self.wall.yaw_deg)), math.sin(math.radians(self.wall.yaw_deg))
+        R_frame_tag = np.array([[-s, 0.0, c], [c, 0.0, s], [0.0, 1.0, 0.0]])
+        return SE3(
+            rotation=SO3.from_matrix(R_frame_tag),
+            translation=np.array([self.wall.x, self.wall.y, self.wall.height]),
+        )
+
+
+class PlanarPose(_Model):
+    """``x``, ``y`` (m) and ``yaw_deg`` of a frame in ``map`` (z = 0, level)."""
+
+    x: float
+    y: float
+    yaw_deg: float = Field(default=0.0, ge=-360.0, le=360.0)
+
+
+class Elevator(_Model):
+    """The elevator cab: a rectangular room with its own frame ``elevator_cab``.
+
+    ``footprint`` is ``[size_x, size_y]`` (m), centred on the cab frame origin; the door is an
+    opening of ``door_width`` centred on the side ``door_side`` of the rectangle.
+    """
+
+    pose_in_map: PlanarPose
+    footprint: tuple[float, float]
+    door_side: Literal["+x", "-x", "+y", "-y"] = "+x"
+    door_width: float = Field(default=1.0, gt=0.0)
+    height: float = Field(default=2.3, gt=0.0)
+    wall_material: Literal["wall", "glass", "mirror"] = "wall"
+
+    @model_validator(mode="after")
+    def _check(self) -> Elevator:
+        if min(self.footprint) <= 0:
+            raise FieldPathError(("footprint",), "sizes must be > 0")
+        along = self.footprint[1] if self.door_side[1] == "x" else self.footprint[0]
+        if self.door_width >= along:
+            raise FieldPathError(
+                ("door_width",),
+                f"{self.door_width} m does not fit the {along} m side {self.door_side}",
+            )
+        return self
+
+    def T_map_cab(self) -> SE3:
+        """Pose of the ``elevator_cab`` frame in ``map``."""
+        return SE3(
+            rotation=SO3.from_matrix(_yaw_matrix(math.radians(self.pose_in_map.yaw_deg))),
+            translation=np.array([self.pose_in_map.x, self.pose_in_map.y, 0.0]),
+        )
+
+    def walls_cab(self) -> list[tuple[Vec2, Vec2]]:
+        """The cab's wall segments in ``elevator_cab`` (the door side split around the door)."""
+        hx, hy, hd = self.footprint[0] / 2, self.footprint[1] / 2, self.door_width / 2
+        sides = {
+            "+x": ((hx, -hy), (hx, hy)),
+            "-x": ((-hx, hy), (-hx, -hy)),
+            "+y": ((hx, hy), (-hx, hy)),
+            "-y": ((-hx, -hy), (hx, -hy)),
+        }
+        segments: list[tuple[Vec2, Vec2]] = []
+        for side, (a, b) in sides.items():
+            if side != self.door_side:
+                segments.append((a, b))
+                continue
+            mid = ((a[0] + b[0]) / 2, (a[1] + b[1]) / 2)
+            u = ((b[0] - a[0]) / math.dist(a, b), (b[1] - a[1]) / math.dist(a, b))
+            segments.append((a, (mid[0] - hd * u[0], mid[1] - hd * u[1])))
+            segments.append(((mid[0] + hd * u[0], mid[1] + hd * u[1]), b))
+        return segments
+
+
+class Checkpoint(_Model):
+    """A named floor position (m) in ``map``."""
+
+    name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")
+    x: float
+    y: float
+    note: str | None = None
+
+
+class Intrinsics(_Model):
+    """Pinhole intrinsics in pixels (OpenCV: centre of the top-left pixel at (0, 0))."""
+
+    fx: float = Field(gt=0.0)
+    fy: float = Field(gt=0.0)
+    cx: float
+    cy: float
+    width: int = Field(gt=0, le=20000)
+    height: int = Field(gt=0, le=20000)
+
+    @model_validator(mode="after")
+    def _centre_inside(self) -> Intrinsics:
+        if not (0 <= self.cx <= self.width and 0 <= self.cy <= self.height):
+            raise FieldPathError(
+                ("cx",),
+                f"principal point ({self.cx}, {self.cy}) lies outside "
+                f"the {self.width}x{self.height} image",
+            )
+        return self
+
+
+class Distortion(_Model):
+    """Lens distortion: ``none``; ``radtan`` (OpenCV k1 k2 p1 p2 [k3 [k4 k5 k6]]); ``equidistant``
+    (OpenCV fisheye k1..k4)."""
+
+    model: Literal["none", "radtan", "equidistant"] = "none"
+    coefficients: tuple[float, ...] = ()
+
+    @model_validator(mode="after")
+    def _count(self) -> Distortion:
+        allowed = {"none": (0,), "radtan": (4, 5, 8), "equidistant": (4,)}[self.model]
+        if len(self.coefficients) not in allowed:
+            raise FieldPathError(
+                ("coefficients",),
+                f"model {self.model} takes "
+                f"{' or '.join(map(str, allowed))} coefficients, "
+                f"got {len(self.coefficients)}",
+            )
+        return self
+
+
+class CameraMount(_Model):
+    """``T_base_cam``: ``position`` (m, in ``base``) and either ``quat_xyzw`` of the optical frame
+    or ``rpy_deg``: roll, pitch, yaw of the camera *body* frame (x forward, y left, z up) in
+    ``base``, ``R = Rz(yaw) Ry(pitch) Rx(roll)`` (positive pitch looks down, REP-103), after which
+    the optical frame is ``R @ R_BODY_OPTICAL``; ``[0, 0, 0]`` is level and forward-looking."""
+
+    position: Vec3
+    quat_xyzw: tuple[float, float, float, float] | None = None
+    rpy_deg: Vec3 | None = None
+
+    @field_validator("quat_xyzw")
+    @classmethod
+    def _check_quat(
+        cls, value: tuple[float, float, float, float] | None
+    ) -> tuple[float, float, float, float] | None:
+        return value if value is None else _unit_quat(value)
+
+    @model_validator(mode="after")
+    def _one_rotation(self) -> CameraMount:
+        if (self.quat_xyzw is None) == (self.rpy_deg is None):
+            raise ValueError("give exactly one of 'quat_xyzw' or 'rpy_deg'")
+        return self
+
+    def T_base_cam(self) -> SE3:
+        """Pose of the optical frame ``cam`` in ``base``."""
+        if self.quat_xyzw is not None:
+            return SE3.from_quat(self.quat_xyzw, self.position)
+        assert self.rpy_deg is not None
+        R_base_body = SO3.from_euler("xyz", self.rpy_deg, degrees=True).as_matrix()
+        return SE3(
+            rotation=SO3.from_matrix(R_base_body @ R_BODY_OPTICAL),
+            translation=np.array(self.position),
+        )
+
+
+class Camera(_Model):
+    """A camera on the robot: intrinsics, distortion, frame rate and mounting."""
+
+    intrinsics: Intrinsics
+    distortion: Distortion = Distortion()
+    rate_hz: float = Field(gt=0.0, le=1000.0)
+    T_base_cam: CameraMount
+
+    def K(self) -> np.ndarray:
+        """The 3x3 camera matrix."""
+        i = self.intrinsics
+        return np.array([[i.fx, 0.0, i.cx], [0.0, i.fy, i.cy], [0.0, 0.0, 1.0]])
+
+
+class Robot(_Model):
+    """The robot: odometry drift model, camera, odometry rate (Hz) and body height (m).
+
+    ``base`` stays on the floor (z = 0 in ``map``); ``base_height`` is the height of the body above
+    the floor, for renderers and sensors that need it.
+    """
+
+    odometry: OdometryConfig
+    camera: Camera
+    odom_rate_hz: float = Field(gt=0.0, le=2000.0)
+    base_height: float = Field(default=0.3, ge=0.0, le=5.0)
+
+
+class World(_Model):
+    """A simulated building and the robot that drives through it (see the module docstring)."""
+
+    version: Literal[1]
+    name: str = ""
+    walls: tuple[Wall, ...] = ()
+    tags: tuple[Tag, ...] = ()
+    elevator: Elevator | None = None
+    checkpoints: tuple[Checkpoint, ...] = ()
+    route: RouteConfig
+    robot: Robot
+
+    @model_validator(mode="after")
+    def _cross_references(self) -> World:
+        seen: dict[tuple[str, int], int] = {}
+        for j, tag in enumerate(self.tags):
+            if (tag.family, tag.id) in seen:
+                raise FieldPathError(
+                    ("tags", j, "id"),
+                    f"duplicate tag id {tag.id} (also tags[{seen[tag.family, tag.id]}])",
+                )
+            seen[tag.family, tag.id] = j
+            if tag.frame == "elevator_cab":
+                if self.elevator is None:
+                    raise FieldPathError(
+                        ("tags", j, "frame"),
+                        "tag is in frame elevator_cab but the world has no elevator",
+                    )
+                xyz = tag.T_frame_tag().translation
+                if np.any(np.abs(xyz[:2]) > np.array(self.elevator.footprint) / 2 + 0.05):
+                    raise FieldPathError(("tags", j), "tag lies outside the elevator cab footprint")
+        names: dict[str, int] = {}
+        for j, cp in enumerate(self.checkpoints):
+            if cp.name in names:
+                raise FieldPathError(
+                    ("checkpoints", j, "name"),
+                    f"duplicate checkpoint {cp.name!r} (also checkpoints[{names[cp.name]}])",
+                )
+            names[cp.name] = j
+        for j, wp in enumerate(self.route.waypoints):
+            if isinstance(wp.at, str) and wp.at not in names:
+                known = ", ".join(list(names)[:12]) + (", ..." if len(names) > 12 else "")
+                raise FieldPathError(
+                    ("route", "waypoints", j),
+                    f"unknown checkpoint {wp.at!r} (known: {known or 'none'})",
+                )
+        return self
+
+    def checkpoints_xy(self) -> dict[str, Vec2]:
+        """Checkpoint name -> ``(x, y)`` in ``map``."""
+        return {cp.name: (cp.x, cp.y) for cp in self.checkpoints}
+
+    def find_tag(self, tag_id: int, family: str = "tag36h11") -> Tag:
+        """The tag with this id and family. Raises ``SimulationError`` if there is none."""
+        for tag in self.tags:
+            if tag.id == tag_id and tag.family == family:
+                return tag
+        raise SimulationError(f"world {self.name!r} has no tag {family}:{tag_id}")
+
+    def T_map_tag(self, tag: Tag) -> SE3:
+        """Pose of ``tag`` in ``map`` (cab tags go through ``elevator.T_map_cab()``)."""
+        if tag.frame == "map":
+            return tag.T_frame_tag()
+        if self.elevator is None:
+            raise SimulationError(f"tag {tag.id} is in elevator_cab but the world has no elevator")
+        return self.elevator.T_map_cab() @ tag.T_frame_tag()
+
+    def walls_in_map(self) -> tuple[Wall, ...]:
+        """The building's walls plus the elevator cab's walls, all in ``map``."""
+        if self.elevator is None:
+            return self.walls
+        T_map_cab = self.elevator.T_map_cab()
+        cab = [
+            Wall(
+                start=tuple(T_map_cab.act([*a, 0.0])[:2]),
+                end=tuple(T_map_cab.act([*b, 0.0])[:2]),
+                material=self.elevator.wall_material,
+                height=self.elevator.height,
+            )
+            for a, b in self.elevator.walls_cab()
+        ]
+        return (*self.walls, *cab)
+
+    @classmethod
+    def from_yaml_text(cls, text: str, source: str = "<string>") -> World:
+        """Parse and validate a world from YAML text; ``source`` names it in error messages.
+
+        Raises
+        ------
+        ConfigError
+            One line: ``source: field.path: problem`` (or ``source: line L, column C: ...``).
+        """
+        try:
+            data = yaml.safe_load(text)
+        except yaml.YAMLError as exc:
+            mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
+            where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
+            problem = getattr(exc, "problem", None) or str(exc)
+            context, start = getattr(exc, "context", None), getattr(exc, "context_mark", None)
+            if context and start is not None and start is not mark:
+                problem += f" ({context} started at line {start.line + 1})"
+            raise ConfigError(_one_line(f"{source}: {where}invalid YAML: {problem}")) from None
+        if not isinstance(data, dict):
+            raise ConfigError(
+                f"{source}: the top level must be a mapping, got {type(data).__name__}"
+            )
+        try:
+            return cls.model_validate(data)
+        except ValidationError as exc:
+            raise ConfigError(format_validation_error(source, exc)) from None
+
+    def to_yaml_text(self) -> str:
+        """This world as YAML text (normalized: defaults filled in, waypoints as mappings)."""
+        return yaml.safe_dump(self.model_dump(mode="json", exclude_none=True), sort_keys=False)
+
+
+def load_world(path: str | os.PathLike[str]) -> World:
+    """Read and validate a world file. Raises ``ConfigError`` (one line) on any problem."""
+    try:
+        with open(path, encoding="utf-8") as handle:
+            text = handle.read()
+    except OSError as exc:
+        raise ConfigError(f"{os.fspath(path)}: cannot read world file: {exc.strerror}") from None
+    return World.from_yaml_text(text, source=os.fspath(path))
+
+
+def load_default_world() -> World:
+    """The built-in office world, ``tagloc/sim/worlds/office.yaml``."""
+    text = resources.files("tagloc.sim").joinpath("worlds/office.yaml").read_text(encoding="utf-8")
+    return World.from_yaml_text(text, source="tagloc/sim/worlds/office.yaml")
+
+
+def format_validation_error(source: str, exc: ValidationError) -> str:
+    """The first error of ``exc`` as ``source: a.b[3].c: message (and N more errors)``."""
+    errors = exc.errors(include_url=False)
+    first = errors[0]
+    loc, msg, ctx = list(first["loc"]), first["msg"], first.get("ctx", {})
+    if isinstance(ctx.get("error"), FieldPathError):
+        loc, msg = loc + list(ctx["error"].path), str(ctx["error"])
+    elif first["type"] in ("union_tag_invalid", "union_tag_not_found"):
+        loc.append(ctx["discriminator"].strip("'"))
+        msg = (
+            f"unknown value {ctx['tag']!r}; allowed: {ctx['expected_tags']}"
+            if first["type"] == "union_tag_invalid"
+            else "field required"
+        )
+    msg = msg.removeprefix("Value error, ")
+    loc = [
+        p
+        for k, p in enumerate(loc)
+        if not (k and loc[k - 1] == "odometry" and p in ODOMETRY_MODELS)
+    ]
+    path = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in loc).lstrip(".")
+    more = (
+        f" (and {len(errors) - 1} more error{'s' * (len(errors) > 2)})" if len(errors) > 1 else ""
+    )
+    return _one_line(f"{source}: {path + ': ' if path else ''}{msg[:1].lower()}{msg[1:]}{more}")
+
+
+def _one_line(text: str) -> str:
+    return " ".join(text.split())
