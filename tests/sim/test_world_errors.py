@@ -133,7 +133,7 @@ CASES: list[tuple[str, Callable[[Doc], None], str]] = [
         lambda d: _set(
             d, ["robot", "camera", "distortion"], {"model": "radtan", "coefficients": [0.1]}
         ),
-        "robot.camera.distortion.coefficients: model radtan takes 4 or 5 or 8 coefficients, got 1",
+        "robot.camera.distortion.coefficients: model radtan takes 4 or 5 coefficients, got 1",
     ),
     (
         "zero rate",

@@ -84,6 +84,8 @@ def check_rotation_matrices(matrix: FloatArray, name: str) -> None:
 
     A matrix passes when ``max |R^T R - I| <= ORTHONORMAL_TOL`` and ``det R > 0``.
     """
+    if matrix.ndim == 2 and _is_rotation_scalar(matrix.tolist()):
+        return  # fast path for one matrix (plain floats beat numpy's per-call overhead)
     gram = np.swapaxes(matrix, -1, -2) @ matrix
     error = np.abs(gram - np.eye(3)).max(axis=(-1, -2))
     worst = int(np.argmax(error)) if error.ndim else 0
@@ -96,6 +98,18 @@ def check_rotation_matrices(matrix: FloatArray, name: str) -> None:
     det = np.linalg.det(matrix)
     if np.any(det <= 0.0):
         raise GeometryError(f"{name} is a reflection, not a rotation (det = {np.min(det):.3g})")
+
+
+def _is_rotation_scalar(rows: list[list[float]]) -> bool:
+    """True when the 3x3 ``rows`` are orthonormal within tolerance with a positive determinant."""
+    (a, b, c), (d, e, f), (g, h, i) = rows
+    columns = ((a, d, g), (b, e, h), (c, f, i))
+    for j in range(3):
+        for k in range(j, 3):
+            dot = sum(x * y for x, y in zip(columns[j], columns[k], strict=True))
+            if abs(dot - (1.0 if j == k else 0.0)) > ORTHONORMAL_TOL:
+                return False
+    return a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) > 0.0
 
 
 def check_points(points: npt.ArrayLike, dim: int, name: str = "points") -> FloatArray:

@@ -20,16 +20,23 @@ from typing import Literal
 
 import numpy as np
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
 
+from tagloc.config import (
+    FieldPathError,
+    StrictModel,
+    check_unit_quat,
+    parse_yaml_mapping,
+    validate,
+)
 from tagloc.errors import ConfigError, SimulationError
 from tagloc.geometry import SE3, SO3
-from tagloc.sim.odometry import ODOMETRY_MODELS, OdometryConfig
+from tagloc.sim.odometry import ODOMETRY_MODELS
+from tagloc.sim.robot import Robot
 from tagloc.sim.trajectory import RouteConfig
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
-UNIT_QUAT_TOL = 1e-6
 #: Codes per AprilTag family: valid ids are ``0 .. n - 1``.
 TAG_FAMILY_SIZES = {
     "tag36h11": 587,
@@ -51,30 +58,7 @@ TagFamily = Literal[
     "tagStandard52h13",
     "tagCustom48h12",
 ]
-#: Camera body (x forward, y left, z up) to OpenCV optical frame (x right, y down, z forward).
-R_BODY_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 
-
-class FieldPathError(ValueError):
-    """A validation failure at ``path`` below the model whose validator raised it."""
-
-    def __init__(self, path: tuple[str | int, ...], message: str) -> None:
-        super().__init__(message)
-        self.path = path
-
-
-class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
-
-
-def _unit_quat(quat_xyzw: tuple[float, float, float, float]) -> tuple[float, float, float, float]:
-    norm = math.sqrt(sum(c * c for c in quat_xyzw))
-    if abs(norm - 1.0) > UNIT_QUAT_TOL:
-        raise ValueError(
-            f"not a unit quaternion: |q| = {norm:.9g} (tolerance {UNIT_QUAT_TOL:g}); "
-            "write it normalized"
-        )
-    return quat_xyzw
 
 
 def _yaw_matrix(yaw: float) -> np.ndarray:
@@ -82,7 +66,7 @@ def _yaw_matrix(yaw: float) -> np.ndarray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
-class Wall(_Model):
+class Wall(StrictModel):
     """A vertical wall: the segment ``start -> end`` on the floor (m), ``height`` (m)."""
 
     start: Vec2
@@ -97,7 +81,7 @@ class Wall(_Model):
         return self
 
 
-class TagPose(_Model):
+class TagPose(StrictModel):
     """Full pose of a tag in its frame: ``position`` (m) and unit ``quat_xyzw``."""
 
     position: Vec3
@@ -108,10 +92,10 @@ class TagPose(_Model):
     def _check_quat(
         cls, value: tuple[float, float, float, float]
     ) -> tuple[float, float, float, float]:
-        return _unit_quat(value)
+        return check_unit_quat(value)
 
 
-class WallMount(_Model):
+class WallMount(StrictModel):
     """Upright tag on a wall: centre ``(x, y, height)``, horizontal face normal at ``yaw_deg``."""
 
     x: float
@@ -120,7 +104,7 @@ class WallMount(_Model):
     height: float = Field(gt=0.0, le=20.0)
 
 
-class Tag(_Model):
+class Tag(StrictModel):
     """One tag: exactly one of ``pose`` or ``wall``, in ``frame`` (``map`` or ``elevator_cab``)."""
 
     id: int = Field(ge=0)
@@ -161,7 +145,7 @@ class Tag(_Model):
         )
 
 
-class PlanarPose(_Model):
+class PlanarPose(StrictModel):
     """``x``, ``y`` (m) and ``yaw_deg`` of a frame in ``map`` (z = 0, level)."""
 
     x: float
@@ -169,7 +153,7 @@ class PlanarPose(_Model):
     yaw_deg: float = Field(default=0.0, ge=-360.0, le=360.0)
 
 
-class Elevator(_Model):
+class Elevator(StrictModel):
     """The elevator cab: a rectangular room with its own frame ``elevator_cab``.
 
     ``footprint`` is ``[size_x, size_y]`` (m), centred on the cab frame origin; the door is an
@@ -223,7 +207,7 @@ class Elevator(_Model):
         return segments
 
 
-class Checkpoint(_Model):
+class Checkpoint(StrictModel):
     """A named floor position (m) in ``map``."""
 
     name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")
@@ -232,110 +216,7 @@ class Checkpoint(_Model):
     note: str | None = None
 
 
-class Intrinsics(_Model):
-    """Pinhole intrinsics in pixels (OpenCV: centre of the top-left pixel at (0, 0))."""
-
-    fx: float = Field(gt=0.0)
-    fy: float = Field(gt=0.0)
-    cx: float
-    cy: float
-    width: int = Field(gt=0, le=20000)
-    height: int = Field(gt=0, le=20000)
-
-    @model_validator(mode="after")
-    def _centre_inside(self) -> Intrinsics:
-        if not (0 <= self.cx <= self.width and 0 <= self.cy <= self.height):
-            raise FieldPathError(
-                ("cx",),
-                f"principal point ({self.cx}, {self.cy}) lies outside "
-                f"the {self.width}x{self.height} image",
-            )
-        return self
-
-
-class Distortion(_Model):
-    """Lens distortion: ``none``; ``radtan`` (OpenCV k1 k2 p1 p2 [k3 [k4 k5 k6]]); ``equidistant``
-    (OpenCV fisheye k1..k4)."""
-
-    model: Literal["none", "radtan", "equidistant"] = "none"
-    coefficients: tuple[float, ...] = ()
-
-    @model_validator(mode="after")
-    def _count(self) -> Distortion:
-        allowed = {"none": (0,), "radtan": (4, 5, 8), "equidistant": (4,)}[self.model]
-        if len(self.coefficients) not in allowed:
-            raise FieldPathError(
-                ("coefficients",),
-                f"model {self.model} takes "
-                f"{' or '.join(map(str, allowed))} coefficients, "
-                f"got {len(self.coefficients)}",
-            )
-        return self
-
-
-class CameraMount(_Model):
-    """``T_base_cam``: ``position`` (m, in ``base``) and either ``quat_xyzw`` of the optical frame
-    or ``rpy_deg``: roll, pitch, yaw of the camera *body* frame (x forward, y left, z up) in
-    ``base``, ``R = Rz(yaw) Ry(pitch) Rx(roll)`` (positive pitch looks down, REP-103), after which
-    the optical frame is ``R @ R_BODY_OPTICAL``; ``[0, 0, 0]`` is level and forward-looking."""
-
-    position: Vec3
-    quat_xyzw: tuple[float, float, float, float] | None = None
-    rpy_deg: Vec3 | None = None
-
-    @field_validator("quat_xyzw")
-    @classmethod
-    def _check_quat(
-        cls, value: tuple[float, float, float, float] | None
-    ) -> tuple[float, float, float, float] | None:
-        return value if value is None else _unit_quat(value)
-
-    @model_validator(mode="after")
-    def _one_rotation(self) -> CameraMount:
-        if (self.quat_xyzw is None) == (self.rpy_deg is None):
-            raise ValueError("give exactly one of 'quat_xyzw' or 'rpy_deg'")
-        return self
-
-    def T_base_cam(self) -> SE3:
-        """Pose of the optical frame ``cam`` in ``base``."""
-        if self.quat_xyzw is not None:
-            return SE3.from_quat(self.quat_xyzw, self.position)
-        assert self.rpy_deg is not None
-        R_base_body = SO3.from_euler("xyz", self.rpy_deg, degrees=True).as_matrix()
-        return SE3(
-            rotation=SO3.from_matrix(R_base_body @ R_BODY_OPTICAL),
-            translation=np.array(self.position),
-        )
-
-
-class Camera(_Model):
-    """A camera on the robot: intrinsics, distortion, frame rate and mounting."""
-
-    intrinsics: Intrinsics
-    distortion: Distortion = Distortion()
-    rate_hz: float = Field(gt=0.0, le=1000.0)
-    T_base_cam: CameraMount
-
-    def K(self) -> np.ndarray:
-        """The 3x3 camera matrix."""
-        i = self.intrinsics
-        return np.array([[i.fx, 0.0, i.cx], [0.0, i.fy, i.cy], [0.0, 0.0, 1.0]])
-
-
-class Robot(_Model):
-    """The robot: odometry drift model, camera, odometry rate (Hz) and body height (m).
-
-    ``base`` stays on the floor (z = 0 in ``map``); ``base_height`` is the height of the body above
-    the floor, for renderers and sensors that need it.
-    """
-
-    odometry: OdometryConfig
-    camera: Camera
-    odom_rate_hz: float = Field(gt=0.0, le=2000.0)
-    base_height: float = Field(default=0.3, ge=0.0, le=5.0)
-
-
-class World(_Model):
+class World(StrictModel):
     """A simulated building and the robot that drives through it (see the module docstring)."""
 
     version: Literal[1]
@@ -427,24 +308,8 @@ class World(_Model):
         ConfigError
             One line: ``source: field.path: problem`` (or ``source: line L, column C: ...``).
         """
-        try:
-            data = yaml.safe_load(text)
-        except yaml.YAMLError as exc:
-            mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
-            where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
-            problem = getattr(exc, "problem", None) or str(exc)
-            context, start = getattr(exc, "context", None), getattr(exc, "context_mark", None)
-            if context and start is not None and start is not mark:
-                problem += f" ({context} started at line {start.line + 1})"
-            raise ConfigError(_one_line(f"{source}: {where}invalid YAML: {problem}")) from None
-        if not isinstance(data, dict):
-            raise ConfigError(
-                f"{source}: the top level must be a mapping, got {type(data).__name__}"
-            )
-        try:
-            return cls.model_validate(data)
-        except ValidationError as exc:
-            raise ConfigError(format_validation_error(source, exc)) from None
+        data = parse_yaml_mapping(text, source)
+        return validate(cls, data, source, union_tags=ODOMETRY_MODELS)
 
     def to_yaml_text(self) -> str:
         """This world as YAML text (normalized: defaults filled in, waypoints as mappings)."""
@@ -465,34 +330,3 @@ def load_default_world() -> World:
     """The built-in office world, ``tagloc/sim/worlds/office.yaml``."""
     text = resources.files("tagloc.sim").joinpath("worlds/office.yaml").read_text(encoding="utf-8")
     return World.from_yaml_text(text, source="tagloc/sim/worlds/office.yaml")
-
-
-def format_validation_error(source: str, exc: ValidationError) -> str:
-    """The first error of ``exc`` as ``source: a.b[3].c: message (and N more errors)``."""
-    errors = exc.errors(include_url=False)
-    first = errors[0]
-    loc, msg, ctx = list(first["loc"]), first["msg"], first.get("ctx", {})
-    if isinstance(ctx.get("error"), FieldPathError):
-        loc, msg = loc + list(ctx["error"].path), str(ctx["error"])
-    elif first["type"] in ("union_tag_invalid", "union_tag_not_found"):
-        loc.append(ctx["discriminator"].strip("'"))
-        msg = (
-            f"unknown value {ctx['tag']!r}; allowed: {ctx['expected_tags']}"
-            if first["type"] == "union_tag_invalid"
-            else "field required"
-        )
-    msg = msg.removeprefix("Value error, ")
-    loc = [
-        p
-        for k, p in enumerate(loc)
-        if not (k and loc[k - 1] == "odometry" and p in ODOMETRY_MODELS)
-    ]
-    path = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in loc).lstrip(".")
-    more = (
-        f" (and {len(errors) - 1} more error{'s' * (len(errors) > 2)})" if len(errors) > 1 else ""
-    )
-    return _one_line(f"{source}: {path + ': ' if path else ''}{msg[:1].lower()}{msg[1:]}{more}")
-
-
-def _one_line(text: str) -> str:
-    return " ".join(text.split())
