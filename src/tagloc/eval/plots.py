@@ -72,7 +72,7 @@ def plot_world_and_paths(
     ax.set_xlabel("x in map (m)")
     ax.set_ylabel("y in map (m)")
     ax.grid(True, alpha=0.3)
-    ax.legend(loc="upper right", fontsize=8)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
     ax.set_title(title or world.name)
     fig.tight_layout()
     with atomic_path(path) as tmp:
