@@ -12,8 +12,8 @@ from tagloc.sim.odometry import (
     WheelOdometryConfig,
     simulate_odometry,
 )
+from tagloc.sim.route import RouteConfig
 from tagloc.sim.trajectory import (
-    RouteConfig,
     RoutePlan,
     Trajectory,
     generate_trajectory,

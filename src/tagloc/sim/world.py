@@ -33,7 +33,7 @@ from tagloc.errors import ConfigError, SimulationError
 from tagloc.geometry import SE3, SO3
 from tagloc.sim.odometry import ODOMETRY_MODELS
 from tagloc.sim.robot import Robot
-from tagloc.sim.trajectory import RouteConfig
+from tagloc.sim.route import RouteConfig
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]

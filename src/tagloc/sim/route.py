@@ -1,0 +1,74 @@
+"""The ``route`` section of a world file: waypoints (checkpoint names or ``[x, y]``), speeds, dwell.
+
+Units: metres, seconds, radians. Checkpoint names are resolved against the world's checkpoints.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Annotated, Any
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
+
+FloatArray = NDArray[np.float64]
+
+
+def _check_target(value: Any) -> Any:
+    """Accept a checkpoint name or a finite ``[x, y]`` pair (as a tuple), else raise."""
+    if isinstance(value, str):
+        return value
+    if (
+        isinstance(value, list | tuple)
+        and len(value) == 2
+        and all(
+            isinstance(c, int | float) and not isinstance(c, bool) and math.isfinite(c)
+            for c in value
+        )
+    ):
+        return (float(value[0]), float(value[1]))
+    raise ValueError(f"expected a checkpoint name or [x, y] in metres, got {value!r}")
+
+
+class Waypoint(BaseModel):
+    """A route waypoint: ``at`` (checkpoint name or ``[x, y]`` in map), optional ``dwell`` (s)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+    at: Annotated[str | tuple[float, float], BeforeValidator(_check_target)]
+    dwell: float | None = Field(default=None, ge=0.0)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _bare(cls, data: Any) -> Any:
+        return data if isinstance(data, dict) else {"at": data}
+
+
+class RouteConfig(BaseModel):
+    """The ``route`` section of a world file (units: m, s, rad; see the module docstring)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+    waypoints: tuple[Waypoint, ...] = Field(min_length=2)
+    speed: float = Field(gt=0.0, le=5.0)
+    accel_max: float = Field(default=0.5, gt=0.0)
+    yaw_rate_max: float = Field(default=0.8, gt=0.0, le=10.0)
+    yaw_accel_max: float = Field(default=1.5, gt=0.0)
+    corner_radius: float = Field(default=0.0, ge=0.0)
+    dwell: float = Field(default=0.0, ge=0.0)
+    repeat: int = Field(default=1, ge=1, le=100)
+
+
+def route_points(
+    route: RouteConfig, checkpoints_xy: Mapping[str, tuple[float, float]]
+) -> tuple[FloatArray, FloatArray]:
+    """Resolve a route into ``(points_xy (M, 2), dwell_s (M,))``, repeated ``route.repeat`` times.
+
+    Raises
+    ------
+    KeyError
+        A waypoint names a checkpoint missing from ``checkpoints_xy`` (the world validates this).
+    """
+    xy = [checkpoints_xy[w.at] if isinstance(w.at, str) else w.at for w in route.waypoints]
+    dwell = [route.dwell if w.dwell is None else w.dwell for w in route.waypoints]
+    return np.array(xy * route.repeat, dtype=np.float64), np.array(dwell * route.repeat)
