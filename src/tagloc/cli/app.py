@@ -7,6 +7,8 @@ from typing import Annotated
 
 import typer
 
+from tagloc.cli.map_cmd import map_app
+
 app = typer.Typer(
     name="tagloc",
     help="Fiducial-tag localization for indoor robots whose odometry drifts.",
@@ -16,6 +18,7 @@ app = typer.Typer(
 )
 world_app = typer.Typer(help="Simulated worlds: check a world file.", no_args_is_help=True)
 app.add_typer(world_app, name="world")
+app.add_typer(map_app, name="map")
 
 WorldOption = Annotated[
     Path | None,
