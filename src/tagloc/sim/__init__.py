@@ -12,6 +12,8 @@ from tagloc.sim.odometry import (
     WheelOdometryConfig,
     simulate_odometry,
 )
+from tagloc.sim.render import RenderedFrame, TagTruth, render_frames, render_tags_scene, render_view
+from tagloc.sim.render_config import RenderConfig
 from tagloc.sim.route import RouteConfig
 from tagloc.sim.trajectory import (
     RoutePlan,
@@ -27,9 +29,12 @@ __all__ = [
     "DriftParameters",
     "Drive",
     "LeggedOdometryConfig",
+    "RenderConfig",
+    "RenderedFrame",
     "RouteConfig",
     "RoutePlan",
     "Tag",
+    "TagTruth",
     "Trajectory",
     "WheelOdometryConfig",
     "World",
@@ -38,6 +43,9 @@ __all__ = [
     "load_world",
     "plan_from_config",
     "plan_route",
+    "render_frames",
+    "render_tags_scene",
+    "render_view",
     "simulate_drive",
     "simulate_odometry",
 ]

@@ -109,11 +109,32 @@ class Camera(StrictModel):
         i, coeffs = self.intrinsics, self.distortion.coefficients
         if self.distortion.model == "equidistant":
             k1, k2, k3, k4 = coeffs
-            return PinholeEquidistant(width=i.width, height=i.height, fx=i.fx, fy=i.fy,
-                                      cx=i.cx, cy=i.cy, k1=k1, k2=k2, k3=k3, k4=k4)
+            return PinholeEquidistant(
+                width=i.width,
+                height=i.height,
+                fx=i.fx,
+                fy=i.fy,
+                cx=i.cx,
+                cy=i.cy,
+                k1=k1,
+                k2=k2,
+                k3=k3,
+                k4=k4,
+            )
         k1, k2, p1, p2, k3 = (*coeffs, 0.0)[:5] if coeffs else (0.0,) * 5
-        return PinholeRadtan(width=i.width, height=i.height, fx=i.fx, fy=i.fy, cx=i.cx,
-                             cy=i.cy, k1=k1, k2=k2, p1=p1, p2=p2, k3=k3)
+        return PinholeRadtan(
+            width=i.width,
+            height=i.height,
+            fx=i.fx,
+            fy=i.fy,
+            cx=i.cx,
+            cy=i.cy,
+            k1=k1,
+            k2=k2,
+            p1=p1,
+            p2=p2,
+            k3=k3,
+        )
 
     def K(self) -> np.ndarray:
         """The 3x3 camera matrix."""

@@ -41,7 +41,6 @@ from tagloc.sim.route import RouteConfig, route_points
 FloatArray = NDArray[np.float64]
 
 
-
 @dataclass(frozen=True, slots=True)
 class Trajectory:
     """Ground truth sampled at ``stamps_ns`` (N samples).

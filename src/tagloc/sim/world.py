@@ -60,7 +60,6 @@ TagFamily = Literal[
 ]
 
 
-
 def _yaw_matrix(yaw: float) -> np.ndarray:
     c, s = math.cos(yaw), math.sin(yaw)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
