@@ -1,8 +1,68 @@
 """Reading and writing files and messages; the only layer that touches the file system.
 
 - :mod:`tagloc.io.kalibr`: Kalibr camchain yaml -> camera models (:func:`load_kalibr_cameras`).
+- :mod:`tagloc.io.messages`: the typed stream records (:class:`OdometryMsg`, :class:`ImageMsg`,
+  :class:`CameraInfoMsg`, :class:`TagDetectionsMsg`, :class:`TransformMsg`,
+  :class:`PoseWithCovarianceMsg`, :class:`GroundTruthMsg`; the :data:`Message` union) and the
+  :class:`MessageSource` / :class:`MessageSink` protocols.
+- :mod:`tagloc.io.bag_reader`: ROS 1 / ROS 2 bags and MCAP files as a source (:class:`BagSource`).
+- :mod:`tagloc.io.bag_writer`: records to MCAP / ROS 2 / ROS 1 bags (:class:`BagSink`).
+- :mod:`tagloc.io.convert`: ROS message fields <-> records (stamps, quaternions, covariance frames).
+- :mod:`tagloc.io.tum`: TUM trajectory files (:func:`read_tum`, :func:`write_tum`).
+- :mod:`tagloc.io.errors`: :class:`TaglocIOError` and its subclasses.
+
+``rosbags`` is imported only when a bag is opened.
 """
 
+from tagloc.io.bag_reader import BagSource, BagTopic, open_bag
+from tagloc.io.bag_writer import BagSink
+from tagloc.io.errors import (
+    BagFormatError,
+    BagTopicError,
+    BagWriteError,
+    InputNotFoundError,
+    RecordError,
+    TaglocIOError,
+    TrajectoryFileError,
+)
 from tagloc.io.kalibr import load_kalibr_cameras
+from tagloc.io.messages import (
+    CameraInfoMsg,
+    GroundTruthMsg,
+    ImageMsg,
+    Message,
+    MessageSink,
+    MessageSource,
+    OdometryMsg,
+    PoseWithCovarianceMsg,
+    TagDetectionsMsg,
+    TransformMsg,
+)
+from tagloc.io.tum import read_tum, write_tum
 
-__all__ = ["load_kalibr_cameras"]
+__all__ = [
+    "BagFormatError",
+    "BagSink",
+    "BagSource",
+    "BagTopic",
+    "BagTopicError",
+    "BagWriteError",
+    "CameraInfoMsg",
+    "GroundTruthMsg",
+    "ImageMsg",
+    "InputNotFoundError",
+    "Message",
+    "MessageSink",
+    "MessageSource",
+    "OdometryMsg",
+    "PoseWithCovarianceMsg",
+    "RecordError",
+    "TagDetectionsMsg",
+    "TaglocIOError",
+    "TrajectoryFileError",
+    "TransformMsg",
+    "load_kalibr_cameras",
+    "open_bag",
+    "read_tum",
+    "write_tum",
+]
