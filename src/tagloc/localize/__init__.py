@@ -1,0 +1,60 @@
+"""Localization: the ``map -> odom`` fusion filter, its gates and its event log.
+
+The filter (:class:`MapOdomFilter`) estimates the correction ``T_map_odom`` from absolute fixes
+(:class:`TagFix`: ``T_map_base`` at a stamp with a right-tangent covariance ``[x, y, z, rx, ry,
+rz]``) and the odometry ``odom -> base`` in a :class:`~tagloc.frames.TransformBuffer`, and
+publishes it so that the odometry chain never jumps. Every decision is a :class:`FilterEvent` in
+its :class:`EventLog`. Tunables live in ``localizer.yaml`` (:class:`LocalizerConfig`).
+
+Policies
+    - No prior at start-up: the first ``k`` mutually consistent fixes initialize the state.
+    - Chi-square gate on the innovation's Mahalanobis distance (dof 6, planar 3).
+    - A fix with a high reprojection error is never used.
+    - After a gap (no accepted fix for ``gap_s`` or ``gap_m``): ``k`` consistent fixes again.
+    - The published correction jumps by at most a cap per update (remainder carried).
+    - Kidnap: ``n`` gated fixes, mutually consistent, from ``min_sources`` sources, with no
+      accepted fix among them, re-initialize the state (a lone glint cannot).
+    - A source gated repeatedly while others are accepted (a moved tag) is flagged suspect and
+      its fixes rejected.
+"""
+
+from tagloc.localize.config import LocalizerConfig, load_localizer_config, save_localizer_config
+from tagloc.localize.events import EventKind, EventLog, FilterEvent
+from tagloc.localize.filter import MapOdomFilter, ProcessNoise
+from tagloc.localize.fix import (
+    CorrectionUpdate,
+    FixQuality,
+    LocalizeError,
+    PoseWithCovariance,
+    TagFix,
+    planar_projection_jacobian,
+)
+from tagloc.localize.gating import (
+    ConsistencyBuffer,
+    CorrectionCap,
+    QualityLimits,
+    SourceMonitor,
+    chi2_threshold,
+)
+
+__all__ = [
+    "ConsistencyBuffer",
+    "CorrectionCap",
+    "CorrectionUpdate",
+    "EventKind",
+    "EventLog",
+    "FilterEvent",
+    "FixQuality",
+    "LocalizeError",
+    "LocalizerConfig",
+    "MapOdomFilter",
+    "PoseWithCovariance",
+    "ProcessNoise",
+    "QualityLimits",
+    "SourceMonitor",
+    "TagFix",
+    "chi2_threshold",
+    "load_localizer_config",
+    "planar_projection_jacobian",
+    "save_localizer_config",
+]

@@ -1,0 +1,169 @@
+"""``localizer.yaml``: the tunables of the ``map -> odom`` filter, with documented defaults.
+
+Loaded like every tagloc file (:mod:`tagloc.config`): unknown keys, NaN and wrong types are one
+:class:`~tagloc.errors.ConfigError` line naming the file and the field path, e.g.
+``localizer.yaml: gates.chi2_quantile: input should be less than 1``. Every section may be left
+out (its defaults apply). The algorithms never see this model: :meth:`MapOdomFilter.from_config
+<tagloc.localize.filter.MapOdomFilter.from_config>` unpacks it into plain arguments.
+
+Units: metres, radians, seconds (converted to integer nanoseconds by the factory); the one angle
+humans type, the per-update cap, is in degrees as its name says.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Annotated, Literal
+
+import yaml
+from pydantic import Field
+
+from tagloc.config import StrictModel, parse_yaml_mapping, validate
+from tagloc.errors import ConfigError
+from tagloc.fileutil import atomic_write_text
+
+_Sigma = Annotated[float, Field(ge=0)]
+#: Standard deviations per axis ``[x, y, z, rx, ry, rz]``, each ``>= 0``.
+SigmaVec6 = tuple[_Sigma, _Sigma, _Sigma, _Sigma, _Sigma, _Sigma]
+
+
+class FramesConfig(StrictModel):
+    """Frame names (configuration, never literals in the algorithm)."""
+
+    map_frame: str = Field("map", min_length=1)
+    odom_frame: str = Field("odom", min_length=1)
+    base_frame: str = Field("base_link", min_length=1)
+
+
+class ProcessNoiseConfig(StrictModel):
+    """Random walk of ``T_map_odom`` driven by the odometry's motion (drift is per metre).
+
+    Each is the standard deviation, per axis ``[x, y, z, rx, ry, rz]`` of the base frame, of the
+    odometry error accumulated over one metre of travel, one radian of rotation, one second:
+    variances add linearly with distance, rotation and time (a random walk). The defaults suit a
+    legged robot's kinematic odometry (several % of distance, yaw the worst axis).
+    """
+
+    sigma_per_sqrt_m: SigmaVec6 = (0.05, 0.05, 0.02, 0.005, 0.005, 0.02)
+    sigma_per_sqrt_rad: SigmaVec6 = (0.02, 0.02, 0.005, 0.005, 0.005, 0.03)
+    #: Small time term: keeps the covariance from collapsing while the robot stands still.
+    sigma_per_sqrt_s: SigmaVec6 = (0.002, 0.002, 0.002, 0.001, 0.001, 0.001)
+    #: Resolution of the odometry path integral (path length and the frame of the noise).
+    motion_step_s: float = Field(0.1, gt=0)
+
+
+class GatesConfig(StrictModel):
+    """Per-fix gates and the k-consistency rule."""
+
+    #: Chi-square quantile of the Mahalanobis gate (dof 6, or 3 in planar mode): a consistent
+    #: fix is wrongly gated once in 1 / (1 - q) fixes.
+    chi2_quantile: float = Field(0.999, gt=0, lt=1)
+    #: A fix whose own RMS reprojection error exceeds this is never used (a glint, blur, a bad
+    #: corner): good AprilTag corners are at 0.1-0.5 px.
+    max_reproj_err_px: float = Field(2.0, gt=0)
+    #: IPPE ambiguity ratio above which a fix is refused (None: no limit; the chi-square gate
+    #: already refuses a flipped branch once the state is known).
+    max_ambiguity_ratio: float | None = Field(None, gt=0)
+    #: Camera-to-tag range above which a fix is refused (None: no limit).
+    max_range_m: float | None = Field(None, gt=0)
+    #: Mutually consistent fixes required at start-up and after a gap before any is applied.
+    k_consistent: int = Field(3, ge=1)
+    #: The k fixes must lie within this window.
+    consistency_window_s: float = Field(3.0, gt=0)
+    #: A gap (re-acquisition needs k consistent fixes again): no accepted fix for this long ...
+    gap_s: float = Field(10.0, gt=0)
+    #: ... or over this much travel.
+    gap_m: float = Field(5.0, gt=0)
+
+
+class CapConfig(StrictModel):
+    """Largest jump of the published ``map -> base`` (at the robot's pose) per update."""
+
+    max_translation_m: float = Field(0.25, gt=0)
+    max_rotation_deg: float = Field(5.0, gt=0, le=180)
+    #: Publish the new correction at once on (re)initialization (a declared re-localization)
+    #: instead of walking to it at the capped rate.
+    snap_on_initialize: bool = True
+
+
+class KidnapConfig(StrictModel):
+    """Re-initialize when the filter is consistently surprised (see ``tagloc.localize``)."""
+
+    enabled: bool = True
+    #: Gated fixes, mutually consistent, with no accepted fix between them, that re-initialize.
+    n_fixes: int = Field(4, ge=2)
+    #: Distinct sources among them: one tag alone cannot tell a kidnap from a moved tag.
+    min_sources: int = Field(2, ge=1)
+    #: The n fixes must lie within this window.
+    window_s: float = Field(5.0, gt=0)
+
+
+class SuspectConfig(StrictModel):
+    """Flag a source (a moved tag) whose fixes are gated while other sources are accepted."""
+
+    #: Consecutive gated fixes of the source, with another source accepted meanwhile.
+    min_gated: int = Field(3, ge=1)
+    #: Consecutive fixes of a suspect source that pass the gate (not applied) to clear it.
+    clear_after: int = Field(10, ge=1)
+
+
+class FilterConfig(StrictModel):
+    """The estimator itself."""
+
+    #: Estimate only x, y, yaw of ``T_map_odom`` (z, roll, pitch pinned at 0; the fixes' z, roll
+    #: and pitch are ignored). For ground robots whose fixes are poor in those axes.
+    planar: bool = False
+    #: Iterated EKF: relinearize while the step seen at the base, ``|H dx|``, exceeds
+    #: ``relinearize_tol`` (m or rad). Skipping it errs by about ``|H dx| |nu| / 2``: under
+    #: 1-2 mm for steps below 5 cm, far under fix noise; larger steps (start-up, after a gap or
+    #: a kidnap, a poor prior) iterate.
+    max_iterations: int = Field(3, ge=1)
+    relinearize_tol: float = Field(0.05, gt=0)
+    #: Published corrections kept for ``correction_at``.
+    history_size: int = Field(10_000, ge=1)
+    #: Events kept in the event log (counts are always exact).
+    max_events: int = Field(100_000, ge=1)
+
+
+class LocalizerConfig(StrictModel):
+    """Everything ``localizer.yaml`` holds; each section has documented defaults."""
+
+    version: Literal[1] = 1
+    frames: FramesConfig = FramesConfig()
+    process_noise: ProcessNoiseConfig = ProcessNoiseConfig()
+    gates: GatesConfig = GatesConfig()
+    cap: CapConfig = CapConfig()
+    kidnap: KidnapConfig = KidnapConfig()
+    suspect: SuspectConfig = SuspectConfig()
+    filter: FilterConfig = FilterConfig()
+
+    @classmethod
+    def from_yaml_text(cls, text: str, source: str = "<string>") -> LocalizerConfig:
+        """Parse and validate YAML text; ``source`` names it in errors.
+
+        Raises
+        ------
+        ConfigError
+            One line: ``source: field.path: problem``.
+        """
+        return validate(cls, parse_yaml_mapping(text, source), source)
+
+    def to_yaml_text(self) -> str:
+        """This configuration as YAML (every default written out)."""
+        return yaml.safe_dump(self.model_dump(mode="json"), sort_keys=False)
+
+
+def load_localizer_config(path: str | os.PathLike[str]) -> LocalizerConfig:
+    """Read and validate ``localizer.yaml``. Raises ``ConfigError`` (one line) on any problem."""
+    try:
+        with open(path, encoding="utf-8") as handle:
+            text = handle.read()
+    except OSError as exc:
+        message = f"{os.fspath(path)}: cannot read localizer config: {exc.strerror}"
+        raise ConfigError(message) from None
+    return LocalizerConfig.from_yaml_text(text, source=os.fspath(path))
+
+
+def save_localizer_config(config: LocalizerConfig, path: str | os.PathLike[str]) -> None:
+    """Write ``config`` as YAML to ``path`` atomically (beside a result, to reproduce it)."""
+    atomic_write_text(path, config.to_yaml_text())

@@ -1,0 +1,267 @@
+"""Pieces of the localization layer: config file, value types, event log, Jacobians, gates."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from test_localize_sim import FIX_COV, S, make_filter
+
+from tagloc.errors import ConfigError, TaglocError
+from tagloc.frames import TransformBuffer
+from tagloc.geometry import (
+    SE2,
+    SE3,
+    se2_right_jacobian,
+    se2_right_jacobian_inv,
+    se3_right_jacobian,
+    se3_right_jacobian_inv,
+)
+from tagloc.localize import (
+    CorrectionCap,
+    EventKind,
+    EventLog,
+    FilterEvent,
+    FixQuality,
+    LocalizeError,
+    LocalizerConfig,
+    MapOdomFilter,
+    QualityLimits,
+    TagFix,
+    chi2_threshold,
+    load_localizer_config,
+    planar_projection_jacobian,
+    save_localizer_config,
+)
+from tagloc.localize import filter as filter_module
+
+# ----- localizer.yaml ----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        (
+            "gates:\n  chi2_quantile: 1.5\n",
+            "localizer.yaml: gates.chi2_quantile: input should be less than 1",
+        ),
+        (
+            "gates:\n  chi2_quantil: 0.99\n",
+            "localizer.yaml: gates.chi2_quantil: extra inputs are not permitted",
+        ),
+        (
+            "process_noise:\n  sigma_per_sqrt_m: [0.1, 0.1, -0.1, 0.01, 0.01, 0.01]\n",
+            "localizer.yaml: process_noise.sigma_per_sqrt_m[2]: input should be greater than or "
+            "equal to 0",
+        ),
+        (
+            "cap:\n  max_translation_m: .nan\n",
+            "localizer.yaml: cap.max_translation_m: input should be a finite number",
+        ),
+        (
+            "kidnap:\n  n_fixes: 1\n",
+            "localizer.yaml: kidnap.n_fixes: input should be greater than or equal to 2",
+        ),
+        ("version: 2\n", "localizer.yaml: version: input should be 1"),
+    ],
+)
+def test_config_errors_are_one_line_naming_the_field(text: str, message: str) -> None:
+    with pytest.raises(ConfigError) as info:
+        LocalizerConfig.from_yaml_text(text, "localizer.yaml")
+    assert str(info.value) == message and "\n" not in str(info.value)
+
+
+def test_config_round_trips_and_loads_from_files(tmp_path) -> None:
+    text = "filter:\n  planar: true\ncap:\n  max_rotation_deg: 2\n"
+    config = LocalizerConfig.from_yaml_text(text)
+    path = tmp_path / "localizer.yaml"
+    save_localizer_config(config, path)
+    assert load_localizer_config(path) == config
+    assert LocalizerConfig.from_yaml_text(LocalizerConfig().to_yaml_text()) == LocalizerConfig()
+    with pytest.raises(ConfigError, match=r"missing\.yaml: cannot read localizer config"):
+        load_localizer_config(tmp_path / "missing.yaml")
+
+
+def test_from_config_unpacks_units() -> None:
+    config = LocalizerConfig.model_validate(
+        {"filter": {"planar": True}, "gates": {"chi2_quantile": 0.99}}
+    )
+    flt = MapOdomFilter.from_config(config, TransformBuffer())
+    assert flt.dof == 3 and flt.threshold == pytest.approx(11.3449, abs=1e-4)
+    assert flt._cap.max_rotation_rad == pytest.approx(math.radians(5.0))
+    assert flt._noise.step_ns == S // 10
+    np.testing.assert_allclose(flt._noise.var_per_m, np.square([0.05, 0.05, 0.02]))
+
+
+def test_chi2_thresholds() -> None:
+    assert chi2_threshold(0.999, 6) == pytest.approx(22.4577, abs=1e-4)
+    assert chi2_threshold(0.999, 3) == pytest.approx(16.2662, abs=1e-4)
+
+
+# ----- value types --------------------------------------------------------------------------
+def _fix(**kw: object) -> TagFix:
+    args: dict[str, object] = dict(
+        stamp_ns=S, T_map_base=SE3.identity(), cov=FIX_COV, source="tag:1", quality=FixQuality(0.3)
+    )
+    args.update(kw)
+    return TagFix(**args)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("kw", "match"),
+    [
+        ({"stamp_ns": 1.5}, "stamp_ns must be an integer"),
+        ({"stamp_ns": True}, "stamp_ns must be an integer"),
+        ({"source": ""}, "source must be a non-empty string"),
+        ({"cov": np.eye(3)}, r"cov must be \(6, 6\)"),
+        ({"cov": -np.eye(6)}, "not positive definite"),
+        ({"cov": np.triu(np.ones((6, 6)))}, "not symmetric"),
+        ({"cov": np.full((6, 6), np.nan)}, "NaN"),
+        ({"T_map_base": SE3.identity(2)}, "must be one SE3"),
+    ],
+)
+def test_tag_fix_validates(kw: dict[str, object], match: str) -> None:
+    with pytest.raises(LocalizeError, match=match) as info:
+        _fix(**kw)
+    assert isinstance(info.value, TaglocError)
+
+
+def test_tag_fix_is_frozen_with_a_read_only_covariance() -> None:
+    fix = _fix(stamp_ns=np.int64(5))
+    assert type(fix.stamp_ns) is int
+    with pytest.raises(AttributeError):
+        fix.source = "tag:2"  # type: ignore[misc]
+    with pytest.raises(ValueError):
+        fix.cov[0, 0] = 1.0
+
+
+def test_planar_projection_jacobian_matches_finite_differences() -> None:
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        T = SE3.random(rng, translation_scale=3.0)
+        J = planar_projection_jacobian(T)
+        eps, numeric = 1e-6, np.zeros((3, 6))
+        for i in range(6):
+            d = np.zeros(6)
+            d[i] = eps
+            numeric[:, i] = (
+                T.plus(d).to_se2().minus(T.to_se2()) - T.plus(-d).to_se2().minus(T.to_se2())
+            ) / (2 * eps)
+        np.testing.assert_allclose(J, numeric, atol=1e-8)
+
+
+# ----- Jacobians of the filter --------------------------------------------------------------
+@pytest.mark.parametrize("scale", [1e-3, 0.04, 0.5])
+def test_jacobian_series_match_the_closed_forms(scale: float) -> None:
+    rng = np.random.default_rng(1)
+    for tau, jr, jr_inv in (
+        (scale * rng.standard_normal(6), se3_right_jacobian, se3_right_jacobian_inv),
+        (scale * rng.standard_normal(3), se2_right_jacobian, se2_right_jacobian_inv),
+    ):
+        np.testing.assert_allclose(filter_module._jr(tau), jr(tau), atol=1e-7)
+        np.testing.assert_allclose(filter_module._jr_inv(tau), jr_inv(tau), atol=1e-7)
+
+
+@pytest.mark.parametrize("planar", [False, True])
+def test_measurement_jacobian_matches_finite_differences(planar: bool) -> None:
+    rng = np.random.default_rng(2)
+    buffer = TransformBuffer()
+    odom = SE3.random(rng, translation_scale=4.0)
+    buffer.set_static("odom", "base_link", odom)
+    flt = make_filter(buffer, filter={"planar": planar})
+    X = SE3.random(rng, translation_scale=2.0)
+    flt.initialize(0, X, np.eye(6) * 0.1)
+    z = X @ odom @ SE3.exp(0.3 * rng.standard_normal(6))
+    cand = flt._candidate(_fix(T_map_base=z, stamp_ns=0), odom)
+    innov = flt._innovation(cand, None)
+    X0, eps = flt._X, 1e-6
+    numeric = np.zeros((flt.dof, flt.dof))
+    for i in range(flt.dof):
+        d = np.zeros(flt.dof)
+        d[i] = eps
+        nus = [cand.z.minus(X0.plus(s * d) @ cand.A) for s in (1, -1)]
+        numeric[:, i] = -(nus[0] - nus[1]) / (2 * eps)
+    np.testing.assert_allclose(innov.H, numeric, atol=1e-6)
+    assert isinstance(X0, SE2 if planar else SE3)
+
+
+# ----- gates and the event log --------------------------------------------------------------
+def test_quality_limits() -> None:
+    limits = QualityLimits(2.0, 0.8, 5.0)
+    assert limits.check(FixQuality(1.0, ambiguity_ratio=0.5, range_m=3.0)) is None
+    assert limits.check(FixQuality(2.5))[0] is EventKind.GATED_REPROJ
+    assert limits.check(FixQuality(math.nan))[0] is EventKind.GATED_REPROJ
+    assert limits.check(FixQuality(1.0, ambiguity_ratio=0.9))[0] is EventKind.GATED_QUALITY
+    assert limits.check(FixQuality(1.0, range_m=6.0))[0] is EventKind.GATED_QUALITY
+
+
+def test_a_fix_with_high_reprojection_error_never_reaches_the_state() -> None:
+    buffer = TransformBuffer()
+    buffer.set_static("odom", "base_link", SE3.identity())
+    flt = make_filter(buffer)
+    for k in range(5):
+        event = flt.update(_fix(stamp_ns=k * S, quality=FixQuality(3.0)))
+        assert event.kind is EventKind.GATED_REPROJ and event.threshold == 2.0
+    assert not flt.initialized and flt.corrections == ()
+
+
+def test_a_fix_without_odometry_is_reported() -> None:
+    buffer = TransformBuffer()
+    buffer.set_transforms("odom", "base_link", np.array([0, S]), SE3.identity(2))
+    event = make_filter(buffer).update(_fix(stamp_ns=3 * S))
+    assert event.kind is EventKind.NO_ODOMETRY and "base_link" in event.detail
+
+
+@pytest.mark.parametrize("kind", [SE3, SE2])
+def test_cap_clips_translation_and_rotation_separately(kind: type) -> None:
+    cap = CorrectionCap(0.25, math.radians(5), True)
+    jump = (
+        SE3.from_rotvec([0, 0, math.radians(20)], [1.0, 0.5, 0.0])
+        if kind is SE3
+        else SE2(1.0, 0.5, math.radians(20))
+    )
+    step, clipped = cap.clip(jump)
+    assert clipped
+    assert np.linalg.norm(step.translation) == pytest.approx(0.25)
+    assert np.linalg.norm(step.log()[2 if kind is SE2 else 3 :]) == pytest.approx(math.radians(5))
+    small = kind.identity()
+    assert cap.clip(small) == (small, False)
+
+
+def test_event_log_counts_by_kind_and_source() -> None:
+    log = EventLog(max_events=2)
+    for kind, source in [
+        (EventKind.ACCEPTED, "tag:1"),
+        (EventKind.GATED_CHI2, "tag:1"),
+        (EventKind.ACCEPTED, "tag:2"),
+    ]:
+        log.append(FilterEvent(0, kind, source, 1.0, 2.0))
+    assert len(log) == 2 and log.last is not None and log.last.source == "tag:2"
+    assert log.counts_by_kind() == {EventKind.ACCEPTED: 2, EventKind.GATED_CHI2: 1}
+    assert log.count(EventKind.ACCEPTED, "tag:1") == 1
+    assert log.counts_by_source()["tag:1"][EventKind.GATED_CHI2] == 1
+    assert str(EventKind.REINITIALIZED_KIDNAP) == "reinitialized_kidnap"
+
+
+@pytest.mark.parametrize("planar", [False, True])
+def test_process_noise_one_increment_equals_the_path_integral(planar: bool) -> None:
+    rng = np.random.default_rng(3)
+    A0, A1 = SE3.random(rng, translation_scale=3.0), SE3.random(rng, translation_scale=3.0)
+    axes = [0, 1, 5] if planar else list(range(6))
+    noise = filter_module.ProcessNoise(
+        rng.uniform(0.1, 1, 6)[axes],
+        rng.uniform(0.1, 1, 6)[axes],
+        rng.uniform(0.1, 1, 6)[axes],
+        S // 10,
+    )
+    R = np.stack([A0.rotation.matrix, A1.rotation.matrix])
+    t = np.stack([A0.translation, A1.translation])
+    Q_path, d_path = noise.covariance(np.array([0, S // 20]), R, t, planar)
+    Q_one, d_one = noise.increment(S // 20, R[0], t[0], R[1], t[1], planar)
+    np.testing.assert_allclose(Q_one, Q_path, rtol=1e-12, atol=1e-15)
+    assert d_one == pytest.approx(d_path) == pytest.approx(np.linalg.norm(t[1] - t[0]))
+    Ad = (A1.to_se2() if planar else A1).adjoint()
+    angle = np.linalg.norm((A0.rotation.inverse() @ A1.rotation).log())
+    var = d_one * noise.var_per_m + angle * noise.var_per_rad + 0.05 * noise.var_per_s
+    np.testing.assert_allclose(Q_one, Ad @ np.diag(var) @ Ad.T, rtol=1e-10)
