@@ -16,8 +16,12 @@ from tagloc.sim import load_default_world, load_world
 def _tagloc(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
         [sys.executable, "-c", "from tagloc.cli import main; main()", *args],
-        capture_output=True, text=True, cwd=cwd, env={"MPLBACKEND": "Agg", "PATH": ""},
-        check=False, timeout=300,
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        env={"MPLBACKEND": "Agg", "PATH": ""},
+        check=False,
+        timeout=300,
     )
 
 

@@ -68,17 +68,33 @@ def test_world_camera_becomes_a_camera_model_that_projects_like_opencv() -> None
     points_cam = np.column_stack([rng.uniform(-1, 1, (50, 2)), rng.uniform(1, 5, 50)])
     for distortion, project in [
         ({"model": "radtan", "coefficients": [-0.2, 0.05, 1e-3, -2e-3, 0.01]}, cv2.projectPoints),
-        ({"model": "equidistant", "coefficients": [-0.01, 0.02, -0.003, 0.001]},
-         cv2.fisheye.projectPoints),
+        (
+            {"model": "equidistant", "coefficients": [-0.01, 0.02, -0.003, 0.001]},
+            cv2.fisheye.projectPoints,
+        ),
     ]:
-        camera = Camera.model_validate({
-            "intrinsics": {"fx": 600, "fy": 610, "cx": 640, "cy": 360, "width": 1280,
-                           "height": 720},
-            "distortion": distortion, "rate_hz": 30,
-            "T_base_cam": {"position": [0, 0, 0.5], "rpy_deg": [0, 0, 0]},
-        })
+        camera = Camera.model_validate(
+            {
+                "intrinsics": {
+                    "fx": 600,
+                    "fy": 610,
+                    "cx": 640,
+                    "cy": 360,
+                    "width": 1280,
+                    "height": 720,
+                },
+                "distortion": distortion,
+                "rate_hz": 30,
+                "T_base_cam": {"position": [0, 0, 0.5], "rpy_deg": [0, 0, 0]},
+            }
+        )
         model = camera.camera_model()
-        expected, _ = project(points_cam.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), camera.K(),
-                              np.array(distortion["coefficients"]))
+        expected, _ = project(
+            points_cam.reshape(-1, 1, 3),
+            np.zeros(3),
+            np.zeros(3),
+            camera.K(),
+            np.array(distortion["coefficients"]),
+        )
         np.testing.assert_allclose(model.project(points_cam), expected.reshape(-1, 2), atol=1e-8)
         assert model.image_size == (1280, 720)

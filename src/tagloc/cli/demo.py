@@ -28,7 +28,9 @@ def run_demo(out: Path, world_path: Path | None, seed: int | None) -> None:
         f"(seed {drive.seed}) drifts {summary.endpoint_drift_m:.2f} m"
     )
     plot_world_and_paths(
-        world, {"ground truth": drive.T_map_base, "odometry": drive.T_odom_base}, plot_path,
+        world,
+        {"ground truth": drive.T_map_base, "odometry": drive.T_odom_base},
+        plot_path,
         title=title,
     )
     atomic_write_text(out / "world.yaml", world.to_yaml_text())
@@ -41,8 +43,10 @@ def run_demo(out: Path, world_path: Path | None, seed: int | None) -> None:
         ("duration", f"{summary.duration_s:.1f} s"),
         ("odometry samples / camera frames", f"{summary.n_poses} / {summary.n_camera_frames}"),
         ("tags in the world", f"{summary.n_tags}"),
-        ("odometry end-point drift", f"{summary.endpoint_drift_m:.3f} m "
-         f"({summary.drift_percent:.2f} % of distance)"),
+        (
+            "odometry end-point drift",
+            f"{summary.endpoint_drift_m:.3f} m ({summary.drift_percent:.2f} % of distance)",
+        ),
         ("odometry end-point yaw drift", f"{summary.endpoint_yaw_drift_deg:.2f} deg"),
         ("odometry ATE RMSE (unaligned)", f"{summary.odom_ate.rmse:.3f} m"),
         ("odometry ATE RMSE (SE(3)-aligned)", f"{summary.odom_ate_aligned.rmse:.3f} m"),

@@ -55,17 +55,36 @@ def plot_world_and_paths(
         position = np.asarray(T_map_tag.translation)
         normal = np.asarray(T_map_tag.rotation.as_matrix())[:, 2]
         ax.plot(position[0], position[1], "s", color="tab:orange", markersize=4)
-        ax.arrow(position[0], position[1], 0.6 * normal[0], 0.6 * normal[1],
-                 width=0.02, color="tab:orange", length_includes_head=True)
+        ax.arrow(
+            position[0],
+            position[1],
+            0.6 * normal[0],
+            0.6 * normal[1],
+            width=0.02,
+            color="tab:orange",
+            length_includes_head=True,
+        )
         label_xy = position[:2] + 0.9 * normal[:2]
-        ax.annotate(str(tag.id), (float(label_xy[0]), float(label_xy[1])), fontsize=7,
-                    ha="center", va="center", color="tab:orange")
+        ax.annotate(
+            str(tag.id),
+            (float(label_xy[0]), float(label_xy[1])),
+            fontsize=7,
+            ha="center",
+            va="center",
+            color="tab:orange",
+        )
     # 3. paths
     colors = ["tab:green", "tab:red", "tab:blue", "tab:gray"]
     for i, (name, T_map_base) in enumerate(paths.items()):
         xy = np.asarray(T_map_base.translation)[:, :2]
-        ax.plot(xy[:, 0], xy[:, 1], color=colors[i % len(colors)], linewidth=1.2,
-                linestyle="-" if i == 0 else "--", label=name)
+        ax.plot(
+            xy[:, 0],
+            xy[:, 1],
+            color=colors[i % len(colors)],
+            linewidth=1.2,
+            linestyle="-" if i == 0 else "--",
+            label=name,
+        )
         ax.plot(*xy[0], "o", color=colors[i % len(colors)])
         ax.plot(*xy[-1], "x", color=colors[i % len(colors)], markersize=9)
     ax.set_aspect("equal")
