@@ -5,6 +5,12 @@
 """
 
 from tagloc.sim.drive import Drive, simulate_drive
+from tagloc.sim.observations import (
+    ObservationConfig,
+    ObservedFrame,
+    TagSighting,
+    simulate_observations,
+)
 from tagloc.sim.odometry import (
     ODOMETRY_MODELS,
     DriftParameters,
@@ -29,11 +35,14 @@ __all__ = [
     "DriftParameters",
     "Drive",
     "LeggedOdometryConfig",
+    "ObservationConfig",
+    "ObservedFrame",
     "RenderConfig",
     "RenderedFrame",
     "RouteConfig",
     "RoutePlan",
     "Tag",
+    "TagSighting",
     "TagTruth",
     "Trajectory",
     "WheelOdometryConfig",
@@ -47,5 +56,6 @@ __all__ = [
     "render_tags_scene",
     "render_view",
     "simulate_drive",
+    "simulate_observations",
     "simulate_odometry",
 ]

@@ -1,0 +1,140 @@
+"""The record of one localization run: what the pipeline produced, what evaluation reads.
+
+A :class:`LocalizationRun` is the interface between :mod:`tagloc.localize` (which fills it while
+replaying a message stream: simulator or bag) and :mod:`tagloc.eval` (which scores it). Everything
+is in memory, stamped in integer nanoseconds, with frame names in the field names.
+
+- ``stamps_ns`` / ``T_odom_base`` / ``T_map_odom`` / ``cov_map_base``: one row per odometry
+  sample, the filter's published ``map -> odom`` correction at that stamp (identity before the
+  filter is initialized, ``initialized[i]`` False) and the covariance of ``T_map_base`` (right
+  tangent ``[x, y, z, rx, ry, rz]``, NaN before initialization).
+- ``T_map_base_truth``: ground truth at the same stamps when known (simulator), else None.
+- ``fixes``: one :class:`FixAttempt` per candidate fix offered to the filter, with the filter's
+  decision, so acceptance can be tabulated against range and angle and false fixes counted.
+- ``frames``: one :class:`CameraFrameRecord` per camera frame, for the per-opportunity
+  reliability protocol (what was truly visible, what was detected, what was accepted).
+- ``events``: the filter's :class:`~tagloc.localize.events.FilterEvent` log.
+- ``kidnaps_ns``: stamps at which the scenario teleported the robot (empty if none).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+from tagloc.geometry import SE3
+from tagloc.localize.events import FilterEvent
+
+__all__ = ["CameraFrameRecord", "FixAttempt", "LocalizationRun"]
+
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class FixAttempt:
+    """One candidate fix and what became of it.
+
+    Attributes
+    ----------
+    stamp_ns : int
+        Camera exposure stamp of the observation.
+    source : str
+        ``"tag:17"`` (single tag) or ``"tags:3,17"`` (joint PnP).
+    tag_ids : tuple of int
+    T_map_base : SE3
+        The fix's pose of the base in the map.
+    cov : (6, 6) float
+        Its covariance, ``[x, y, z, rx, ry, rz]`` right tangent.
+    decision : str
+        The filter's :class:`~tagloc.localize.events.EventKind` value (``"accepted"``,
+        ``"gated_chi2"``, ...) or the per-observation gate's reason (``"rejected:<reason>"``)
+        when the fix never reached the filter.
+    range_m : float
+        Camera to the nearest tag in the fix, m.
+    view_angle_rad : float
+        Viewing angle of that tag (0 = head-on).
+    false_detection : bool or None
+        True if built from an injected false detection (simulator), None if unknown (bag).
+    """
+
+    stamp_ns: int
+    source: str
+    tag_ids: tuple[int, ...]
+    T_map_base: SE3
+    cov: FloatArray
+    decision: str
+    range_m: float
+    view_angle_rad: float
+    false_detection: bool | None = None
+
+    @property
+    def accepted(self) -> bool:
+        """Whether the filter accepted (or initialized from) the fix."""
+        return self.decision in ("accepted", "initialized", "reinitialized_kidnap")
+
+
+@dataclass(frozen=True, slots=True)
+class CameraFrameRecord:
+    """One camera frame: the truth in view (simulator) and what the pipeline made of it.
+
+    Attributes
+    ----------
+    stamp_ns : int
+    nearest_visible_tag_m : float
+        Camera to the nearest tag truly in view, m (simulator truth; for a bag, the nearest
+        detected tag); ``inf`` when none.
+    n_detections : int
+        Detections the detector reported (true and false).
+    n_fixes_accepted : int
+        Fixes from this frame the filter accepted.
+    """
+
+    stamp_ns: int
+    nearest_visible_tag_m: float
+    n_detections: int
+    n_fixes_accepted: int
+
+
+@dataclass(slots=True, eq=False)
+class LocalizationRun:
+    """Everything one run produced (see the module docstring).
+
+    Attributes
+    ----------
+    name : str
+        Scenario or bag name, for reports.
+    stamps_ns : (N,) int64
+    T_odom_base : SE3 batch of N
+    T_map_odom : SE3 batch of N
+        Published correction at each stamp.
+    cov_map_base : (N, 6, 6) float
+        NaN where not initialized.
+    initialized : (N,) bool
+    T_map_base_truth : SE3 batch of N or None
+    fixes : list of FixAttempt
+    frames : list of CameraFrameRecord
+    events : list of FilterEvent
+    kidnaps_ns : list of int
+    metadata : dict
+        Free-form facts for the report (world, seed, config values, wall time).
+    """
+
+    name: str
+    stamps_ns: npt.NDArray[np.int64]
+    T_odom_base: SE3
+    T_map_odom: SE3
+    cov_map_base: FloatArray
+    initialized: npt.NDArray[np.bool_]
+    T_map_base_truth: SE3 | None = None
+    fixes: list[FixAttempt] = field(default_factory=list)
+    frames: list[CameraFrameRecord] = field(default_factory=list)
+    events: list[FilterEvent] = field(default_factory=list)
+    kidnaps_ns: list[int] = field(default_factory=list)
+    metadata: dict[str, object] = field(default_factory=dict)
+
+    @property
+    def T_map_base(self) -> SE3:
+        """The fused estimate of the base in the map, ``T_map_odom @ T_odom_base`` (batch)."""
+        return self.T_map_odom @ self.T_odom_base
