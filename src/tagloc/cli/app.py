@@ -7,6 +7,7 @@ from typing import Annotated
 
 import typer
 
+from tagloc.cli.eval_cmd import eval_app
 from tagloc.cli.map_cmd import map_app
 
 app = typer.Typer(
@@ -19,6 +20,7 @@ app = typer.Typer(
 world_app = typer.Typer(help="Simulated worlds: check a world file.", no_args_is_help=True)
 app.add_typer(world_app, name="world")
 app.add_typer(map_app, name="map")
+app.add_typer(eval_app, name="eval")
 
 WorldOption = Annotated[
     Path | None,
