@@ -46,3 +46,7 @@ class ConfigError(TaglocError, ValueError):
 
 class SimulationError(TaglocError):
     """A simulation that cannot be run as configured."""
+
+
+class RecordError(TaglocError, ValueError):
+    """A stream record (:mod:`tagloc.messages`) built with a malformed field."""

@@ -1,4 +1,4 @@
-"""Stream records (``tagloc.io.messages``): validation, immutability, the covariance convention."""
+"""Stream records (``tagloc.messages``): validation, immutability, the covariance convention."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """Reading and writing files and messages; the only layer that touches the file system.
 
 - :mod:`tagloc.io.kalibr`: Kalibr camchain yaml -> camera models (:func:`load_kalibr_cameras`).
-- :mod:`tagloc.io.messages`: the typed stream records (:class:`OdometryMsg`, :class:`ImageMsg`,
+- :mod:`tagloc.messages`: the typed stream records (:class:`OdometryMsg`, :class:`ImageMsg`,
   :class:`CameraInfoMsg`, :class:`TagDetectionsMsg`, :class:`TransformMsg`,
   :class:`PoseWithCovarianceMsg`, :class:`GroundTruthMsg`; the :data:`Message` union) and the
   :class:`MessageSource` / :class:`MessageSink` protocols.
@@ -26,7 +26,8 @@ from tagloc.io.errors import (
     TrajectoryFileError,
 )
 from tagloc.io.kalibr import load_kalibr_cameras
-from tagloc.io.messages import (
+from tagloc.io.tum import read_tum, write_tum
+from tagloc.messages import (
     CameraInfoMsg,
     GroundTruthMsg,
     ImageMsg,
@@ -38,7 +39,6 @@ from tagloc.io.messages import (
     TagDetectionsMsg,
     TransformMsg,
 )
-from tagloc.io.tum import read_tum, write_tum
 
 __all__ = [
     "BagFormatError",

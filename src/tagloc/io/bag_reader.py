@@ -1,6 +1,6 @@
 """Read ROS 1 bags, ROS 2 bags and MCAP files as a stream of tagloc records.
 
-:class:`BagSource` is a :class:`~tagloc.io.messages.MessageSource` over ``rosbags``'
+:class:`BagSource` is a :class:`~tagloc.messages.MessageSource` over ``rosbags``'
 ``AnyReader``: ``for topic, msg in BagSource("drive.bag"): ...``.
 
 Decisions
@@ -52,7 +52,7 @@ from typing import Any, Literal, NamedTuple
 from tagloc.fileutil import atomic_path
 from tagloc.io.convert import DECODERS, Bad, DecodeOptions, decode, make_typestore
 from tagloc.io.errors import BagFormatError, BagTopicError, InputNotFoundError, RecordError
-from tagloc.io.messages import Message, TransformMsg
+from tagloc.messages import Message, TransformMsg
 from tagloc.tags.detection import TAGLOC_ORDER, corner_permutation
 from tagloc.tags.families import family_spec
 
@@ -138,7 +138,7 @@ def _decompressed(path: Path, cache_dir: str | os.PathLike[str] | None) -> Path:
 
 
 class BagSource:
-    """A bag, ROS 2 bag or MCAP file as a :class:`~tagloc.io.messages.MessageSource`.
+    """A bag, ROS 2 bag or MCAP file as a :class:`~tagloc.messages.MessageSource`.
 
     Parameters
     ----------

@@ -1,6 +1,6 @@
 """Write tagloc records to an MCAP file, a ROS 2 bag or a ROS 1 bag, with standard message types.
 
-:class:`BagSink` is a :class:`~tagloc.io.messages.MessageSink`. Records become:
+:class:`BagSink` is a :class:`~tagloc.messages.MessageSink`. Records become:
 
 ======================  ========================================================================
 OdometryMsg             ``nav_msgs/Odometry`` (twist None -> zeros; twist covariance zeros)
@@ -38,7 +38,7 @@ import numpy as np
 
 from tagloc.io.convert import TAGS_ROS1, TAGS_ROS2, cov_ros_from_body, make_typestore
 from tagloc.io.errors import BagWriteError
-from tagloc.io.messages import (
+from tagloc.messages import (
     MESSAGE_TYPES,
     CameraInfoMsg,
     GroundTruthMsg,

@@ -33,7 +33,7 @@ import numpy as np
 
 from tagloc.geometry import SE3
 from tagloc.io.errors import BagFormatError
-from tagloc.io.messages import (
+from tagloc.messages import (
     CameraInfoMsg,
     FloatArray,
     GroundTruthMsg,

@@ -7,7 +7,17 @@ message index, line or field at fault (``"drive.bag: /odom message 12: ..."``).
 
 from __future__ import annotations
 
-from tagloc.errors import TaglocError
+from tagloc.errors import RecordError, TaglocError
+
+__all__ = [
+    "BagFormatError",
+    "BagTopicError",
+    "BagWriteError",
+    "InputNotFoundError",
+    "RecordError",
+    "TaglocIOError",
+    "TrajectoryFileError",
+]
 
 
 class TaglocIOError(TaglocError):
@@ -33,10 +43,6 @@ class BagTopicError(BagFormatError, LookupError):
 
 class BagWriteError(TaglocIOError):
     """A bag that cannot be written: the target exists, a record does not fit its topic."""
-
-
-class RecordError(TaglocIOError, ValueError):
-    """A stream record (:mod:`tagloc.io.messages`) built with a malformed field."""
 
 
 class TrajectoryFileError(TaglocIOError, ValueError):
