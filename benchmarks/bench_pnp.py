@@ -18,13 +18,12 @@ per frame and per tag.
 from __future__ import annotations
 
 import argparse
-import statistics
-import time
 from collections.abc import Callable
 
 import cv2
 import numpy as np
 
+from _timing import per_call_ns
 from tagloc.camera import PinholeRadtan
 from tagloc.geometry import SE3, SO3
 from tagloc.tags.covariance import NoiseModel
@@ -37,22 +36,6 @@ SIZE = 0.16
 CAMERA = PinholeRadtan(
     width=1280, height=720, fx=640.0, fy=640.0, cx=639.5, cy=359.5, k1=-0.05, k2=0.01
 )
-
-
-def per_call_ns(fn: Callable[[], object], repeats: int, target_ns: float = 2e7) -> float:
-    """Median over ``repeats`` of the mean time per call of ``fn`` (ns); loops sized to ~20 ms."""
-    fn()
-    start = time.perf_counter_ns()
-    fn()
-    once = max(time.perf_counter_ns() - start, 1)
-    number = max(1, int(target_ns // once))
-    samples = []
-    for _ in range(repeats):
-        start = time.perf_counter_ns()
-        for _ in range(number):
-            fn()
-        samples.append((time.perf_counter_ns() - start) / number)
-    return statistics.median(samples)
 
 
 def frame(n_tags: int, rng: np.random.Generator) -> tuple[list[TagDetection], dict[int, SE3], SE3]:
