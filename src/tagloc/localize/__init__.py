@@ -1,4 +1,6 @@
-"""Localization: the ``map -> odom`` fusion filter, its gates and its event log.
+"""Localization: the ``map -> odom`` fusion filter, its gates and its event log; the fiducial
+fix source (:class:`FiducialFixSource`) and the pipeline from a message stream to a
+:class:`LocalizationRun` (:class:`LocalizationPipeline`, :func:`localize`).
 
 The filter (:class:`MapOdomFilter`) estimates the correction ``T_map_odom`` from absolute fixes
 (:class:`TagFix`: ``T_map_base`` at a stamp with a right-tangent covariance ``[x, y, z, rx, ry,
@@ -20,6 +22,7 @@ Policies
 
 from tagloc.localize.config import LocalizerConfig, load_localizer_config, save_localizer_config
 from tagloc.localize.events import EventKind, EventLog, FilterEvent
+from tagloc.localize.fiducial import FiducialConfig, FiducialFixSource, FrameFixes
 from tagloc.localize.filter import MapOdomFilter, ProcessNoise
 from tagloc.localize.fix import (
     CorrectionUpdate,
@@ -36,18 +39,36 @@ from tagloc.localize.gating import (
     SourceMonitor,
     chi2_threshold,
 )
+from tagloc.localize.pipeline import (
+    FrameTruth,
+    LocalizationPipeline,
+    PipelineInputError,
+    PipelineTopics,
+    localize,
+)
+from tagloc.localize.run import CameraFrameRecord, FixAttempt, LocalizationRun
 
 __all__ = [
+    "CameraFrameRecord",
     "ConsistencyBuffer",
     "CorrectionCap",
     "CorrectionUpdate",
     "EventKind",
     "EventLog",
+    "FiducialConfig",
+    "FiducialFixSource",
     "FilterEvent",
+    "FixAttempt",
     "FixQuality",
+    "FrameFixes",
+    "FrameTruth",
+    "LocalizationPipeline",
+    "LocalizationRun",
     "LocalizeError",
     "LocalizerConfig",
     "MapOdomFilter",
+    "PipelineInputError",
+    "PipelineTopics",
     "PoseWithCovariance",
     "ProcessNoise",
     "QualityLimits",
@@ -55,6 +76,7 @@ __all__ = [
     "TagFix",
     "chi2_threshold",
     "load_localizer_config",
+    "localize",
     "planar_projection_jacobian",
     "save_localizer_config",
 ]

@@ -73,6 +73,7 @@ from tagloc.localize.gating import (
     QualityLimits,
     SourceMonitor,
     chi2_threshold,
+    pair_d2,
 )
 
 logger = logging.getLogger(__name__)
@@ -233,6 +234,8 @@ class MapOdomFilter:
         Re-initialize from ``kidnap_n`` gated, mutually consistent fixes of at least
         ``kidnap_min_sources`` sources within the window, with no accepted fix among them
         (``kidnap_n = 0`` disables it).
+    kidnap_n_one_source : int
+        Or from this many such fixes of one source (0: never from one source).
     suspect_min_gated, suspect_clear_after : int
         See :class:`~tagloc.localize.gating.SourceMonitor`.
     max_iterations : int
@@ -246,6 +249,7 @@ class MapOdomFilter:
         planar: bool, noise: ProcessNoise, chi2_quantile: float, quality: QualityLimits,
         k_consistent: int, consistency_window_ns: int, gap_ns: int, gap_m: float,
         cap: CorrectionCap, kidnap_n: int, kidnap_min_sources: int, kidnap_window_ns: int,
+        kidnap_n_one_source: int = 0,
         suspect_min_gated: int, suspect_clear_after: int, max_iterations: int,
         relinearize_tol: float, history_size: int, max_events: int,
     ) -> None:  # fmt: skip
@@ -265,7 +269,17 @@ class MapOdomFilter:
             max(kidnap_n, 2), kidnap_window_ns, self.threshold, kidnap_min_sources,
             self._pair_noise,
         )  # fmt: skip
+        self._kidnap_one = (
+            ConsistencyBuffer(
+                kidnap_n_one_source, kidnap_window_ns, self.threshold, 1, self._pair_noise
+            )
+            if kidnap_n_one_source > 0
+            else None
+        )
         self._sources = SourceMonitor(suspect_min_gated, suspect_clear_after)
+        self._last_gated: dict[str, Candidate] = {}  # per source, for the suspect test
+        self._batch: tuple[tuple[TagFix, EventKind], ...] = ()
+        self.batch_serial = 0
         self.events = EventLog(max_events)
         self._history: deque[CorrectionUpdate] = deque(maxlen=history_size)
         self._X: Pose | None = None
@@ -304,6 +318,7 @@ class MapOdomFilter:
             ),
             kidnap_n=k.n_fixes if k.enabled else 0, kidnap_min_sources=k.min_sources,
             kidnap_window_ns=round(k.window_s * S_NS),
+            kidnap_n_one_source=k.n_fixes_one_source if k.enabled else 0,
             suspect_min_gated=config.suspect.min_gated,
             suspect_clear_after=config.suspect.clear_after,
             max_iterations=config.filter.max_iterations,
@@ -343,6 +358,13 @@ class MapOdomFilter:
     def suspect_sources(self) -> tuple[str, ...]:
         """Sources flagged suspect (e.g. ``("tag:17",)`` for a moved tag), sorted."""
         return self._sources.suspects
+
+    @property
+    def last_batch(self) -> tuple[tuple[TagFix, EventKind], ...]:
+        """The fixes the latest batch decision used, each with its final decision: the
+        consistent set of a (re)initialization, or the held fixes applied after a gap.
+        :attr:`batch_serial` counts batches, so a caller sees when a new one happened."""
+        return self._batch
 
     @property
     def source_stats(self) -> SourceMonitor:
@@ -471,7 +493,12 @@ class MapOdomFilter:
         d2 = innov.d2
         if d2 > self.threshold:
             event = self._event(fix.stamp_ns, EventKind.GATED_CHI2, fix.source, d2)
-            if self._sources.on_gated(fix.source, d2):
+            last = self._last_gated.get(fix.source)
+            self._last_gated[fix.source] = cand
+            consistent = last is not None and (
+                pair_d2(last, cand, self._pair_noise(last, cand)) <= self.threshold
+            )
+            if self._sources.on_gated(fix.source, d2, consistent):
                 stats = self._sources.stats[fix.source]
                 self._event(
                     fix.stamp_ns, EventKind.SUSPECT_SOURCE, fix.source, d2,
@@ -479,9 +506,14 @@ class MapOdomFilter:
                     "were accepted: moved or mis-surveyed?",
                 )  # fmt: skip
                 self._kidnap.remove_source(fix.source)
+                if self._kidnap_one is not None:
+                    self._kidnap_one.remove_source(fix.source)
             elif self._kidnap_on:
                 self._kidnap.expire(fix.stamp_ns)
                 found = self._kidnap.add(cand)
+                if found is None and self._kidnap_one is not None:
+                    self._kidnap_one.expire(fix.stamp_ns)
+                    found = self._kidnap_one.add(cand)
                 if found is not None:
                     self._reinitialize(found, EventKind.REINITIALIZED_KIDNAP)
             return event
@@ -489,6 +521,8 @@ class MapOdomFilter:
         self._updated_ns = max(self._updated_ns, fix.stamp_ns)
         self._sources.on_accepted(fix.source, d2)
         self._kidnap.clear()
+        if self._kidnap_one is not None:
+            self._kidnap_one.clear()
         self._ref_stamp = max(self._ref_stamp, fix.stamp_ns)
         self._ref_odometer = self._odometer_m
         event = self._event(fix.stamp_ns, EventKind.ACCEPTED, fix.source, d2)
@@ -534,9 +568,25 @@ class MapOdomFilter:
             self._event(old.stamp_ns, EventKind.DISCARDED_CANDIDATE, old.fix.source)
         self._gap = False
         self._ref_stamp, self._ref_odometer = found[-1].stamp_ns, self._odometer_m
-        for member in found:
-            self._decide(member)
+        if self._kidnap_on and all(self._gated_now(m) for m in found):
+            # Re-acquisition after a gap: k consistent fixes that all disagree with the stale
+            # state re-initialize it (the start-up rule), instead of waiting for the kidnap
+            # test's second source: the state is unconfirmed, the k fixes agree.
+            self._reinitialize(found, EventKind.REINITIALIZED_KIDNAP)
+            return event
+        self._set_batch([(m.fix, self._decide(m).kind) for m in found])
         return event
+
+    def _set_batch(self, batch: list[tuple[TagFix, EventKind]]) -> None:
+        self._batch = tuple(batch)
+        self.batch_serial += 1
+
+    def _gated_now(self, cand: Candidate) -> bool:
+        """Whether ``cand`` fails the chi-square gate against the current state."""
+        Q_back = None
+        if cand.stamp_ns < self._stamp:
+            Q_back = self._noise_between(cand.stamp_ns, self._stamp, cand.odom, self._A)[0]
+        return self._innovation(cand, Q_back).d2 > self.threshold
 
     def _reinitialize(self, found: list[Candidate], kind: EventKind) -> None:
         """Restart the state from consistent fixes (oldest first): the first sets ``X`` and
@@ -554,6 +604,9 @@ class MapOdomFilter:
         for old in self._candidates.clear():
             self._event(old.stamp_ns, EventKind.DISCARDED_CANDIDATE, old.fix.source)
         self._kidnap.clear()
+        if self._kidnap_one is not None:
+            self._kidnap_one.clear()
+        self._set_batch([(c.fix, kind) for c in found])
         sources = "+".join(sorted({c.fix.source for c in found}))
         t = self._lift(self._require()).translation
         self._event(

@@ -36,6 +36,16 @@ def chi2_threshold(quantile: float, dof: int) -> float:
     return float(chi2.ppf(quantile, dof))
 
 
+def pair_d2(a: Candidate, b: Candidate, Q_ab: FloatArray) -> float:
+    """Squared Mahalanobis distance between the corrections two fixes imply (``Q_ab``: the
+    random walk between their stamps); the pairwise test of :class:`ConsistencyBuffer`."""
+    if a.stamp_ns > b.stamp_ns:
+        a, b = b, a
+    e, J_e_b, J_e_a = b.T_map_odom.minus(a.T_map_odom, jacobians=True)  # type: ignore[call-overload]
+    S = J_e_a @ a.cov @ J_e_a.T + J_e_b @ b.cov @ J_e_b.T + Q_ab
+    return mahalanobis_sq(e, S)
+
+
 def mahalanobis_sq(nu: FloatArray, S: FloatArray) -> float:
     """``nu^T S^-1 nu`` for an innovation ``nu (d,)`` with covariance ``S (d, d)``."""
     return float(nu @ np.linalg.solve(S, nu))
@@ -158,11 +168,7 @@ class ConsistencyBuffer:
         key = (id(a), id(b)) if id(a) < id(b) else (id(b), id(a))
         d2 = self._d2.get(key)
         if d2 is None:
-            if a.stamp_ns > b.stamp_ns:
-                a, b = b, a
-            e, J_e_b, J_e_a = b.T_map_odom.minus(a.T_map_odom, jacobians=True)  # type: ignore[call-overload]
-            S = J_e_a @ a.cov @ J_e_a.T + J_e_b @ b.cov @ J_e_b.T + self._pair_noise(a, b)
-            d2 = self._d2[key] = mahalanobis_sq(e, S)
+            d2 = self._d2[key] = pair_d2(a, b, self._pair_noise(a, b))
         return d2
 
     def consistent(self, a: Candidate, b: Candidate) -> bool:
@@ -265,12 +271,20 @@ class SourceMonitor:
             stats.nis_sum += d2
             stats.nis_count += 1
 
-    def on_gated(self, source: str, d2: float) -> bool:
-        """Record a gated fix; True if this flags the source suspect."""
+    def on_gated(self, source: str, d2: float, consistent: bool = True) -> bool:
+        """Record a gated fix; True if this flags the source suspect.
+
+        ``consistent``: whether the fix implies the same correction as the source's previous
+        gated fix. A moved tag is wrong the same way every time; glints decoded under the
+        tag's id are wrong at random, so an inconsistent fix restarts the run (glints never
+        make a real tag suspect).
+        """
         stats = self._get(source)
         stats.gated += 1
         stats.nis_sum += d2
         stats.nis_count += 1
+        if not consistent:
+            stats.streak_gated = 0
         if stats.streak_gated == 0:
             stats.accepted_total_at_streak = self.accepted_total
         stats.streak_gated += 1

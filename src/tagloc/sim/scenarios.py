@@ -1,0 +1,378 @@
+"""Named localization scenarios: a drive, how the camera sees tags, the true world vs the map.
+
+Each scenario is one row of :data:`SCENARIOS` (a :class:`ScenarioSpec`, pure data) applied to the
+built-in office world by :func:`build_scenario`:
+
+============  ===================================================================================
+default       the route with legged odometry (drifting several % of distance)
+kidnap        at ``kidnap_at_s`` the robot is carried ``kidnap_skip_s`` further along the route:
+              the ground truth jumps, the odometry continues smoothly (spliced)
+glint         false detections injected at ``glint_rate`` per frame (wrong ids, random quads)
+moved_tag     tag ``moved_tags`` physically moved after the map was made: observations come
+              from the moved world, the map from the original
+corridor      a long featureless corridor: the corridor's middle tags removed from world and map
+dropout       camera frames dropped over ``dropout_s``
+============  ===================================================================================
+
+Pure: the same name, seed and duration give the same scenario.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import numpy.typing as npt
+
+from tagloc.errors import SimulationError
+from tagloc.geometry import SE3
+from tagloc.localize.config import LocalizerConfig
+from tagloc.localize.fiducial import FiducialConfig
+from tagloc.localize.pipeline import FrameTruth, LocalizationPipeline, PipelineTopics
+from tagloc.localize.run import LocalizationRun
+from tagloc.messages import (
+    CameraInfoMsg,
+    GroundTruthMsg,
+    Message,
+    OdometryMsg,
+    TagDetectionsMsg,
+    TransformMsg,
+)
+from tagloc.sim.drive import Drive, simulate_drive
+from tagloc.sim.observations import ObservationConfig, simulate_observations
+from tagloc.sim.trajectory import Trajectory
+from tagloc.sim.world import WallMount, World, load_default_world
+from tagloc.tags.covariance import NoiseModel
+from tagloc.tags.tagmap import TagEntry, TagMap
+
+__all__ = [
+    "SCENARIOS",
+    "Scenario",
+    "ScenarioSource",
+    "ScenarioSpec",
+    "SplicedDrive",
+    "build_scenario",
+    "localize_scenario",
+    "run_scenario",
+    "tag_map_from_world",
+]
+
+S_NS = 1_000_000_000
+MAP_FRAME, ODOM_FRAME, BASE_FRAME, CAMERA_FRAME = "map", "odom", "base_link", "camera_optical"
+TF_STATIC = "/tf_static"
+#: Odometry covariance written with the simulated odometry (informational; the filter's process
+#: noise is configured in ``localizer.yaml``).
+_ODOM_COV = np.diag(np.square([0.02, 0.02, 0.01, 0.005, 0.005, 0.02]))
+
+
+@dataclass(frozen=True, slots=True)
+class ScenarioSpec:
+    """One scenario as data (see the module docstring). Times in seconds after the start."""
+
+    description: str
+    observation: dict[str, float] = field(default_factory=dict)
+    remove_tags: tuple[int, ...] = ()
+    moved_tags: dict[int, tuple[float, float]] = field(default_factory=dict)  # id -> (dx, dy) m
+    kidnap_at_s: float | None = None
+    kidnap_skip_s: float = 0.0
+    dropout_s: tuple[float, float] | None = None
+
+
+SCENARIOS: dict[str, ScenarioSpec] = {
+    "default": ScenarioSpec("the office route, legged odometry"),
+    "kidnap": ScenarioSpec(
+        "robot carried 122.5 s further along the route at t = 40 s (odometry unaware), to the "
+        "room_b door where two tags are in view",
+        kidnap_at_s=40.0,
+        kidnap_skip_s=122.5,
+    ),
+    "glint": ScenarioSpec(
+        "false detections, 0.6 per frame (wrong ids on real corners, random quads)",
+        observation={"glint_rate": 0.6},
+    ),
+    "moved_tag": ScenarioSpec(
+        "tag 5 moved 0.4 m along its wall after the survey", moved_tags={5: (0.4, 0.0)}
+    ),
+    "corridor": ScenarioSpec(
+        "corridor tags 1-3 and 5-8 removed: 20 m without tags", remove_tags=(1, 2, 3, 5, 6, 7, 8)
+    ),
+    "dropout": ScenarioSpec("camera frames dropped from 20 s to 50 s", dropout_s=(20.0, 50.0)),
+}
+
+
+@dataclass(frozen=True, slots=True)
+class SplicedDrive(Drive):
+    """A drive whose ground truth skips ``skip_ns`` of the route from ``kidnap_ns`` on."""
+
+    kidnap_ns: int = 0
+    skip_ns: int = 0
+
+    def ground_truth_at(self, stamps_ns: npt.NDArray[np.int64]) -> Trajectory:
+        """Truth at ``stamps_ns``: the route's, shifted by ``skip_ns`` from the kidnap on."""
+        stamps = np.asarray(stamps_ns, dtype=np.int64)
+        shifted = np.where(stamps >= self.kidnap_ns, stamps + self.skip_ns, stamps)
+        return self.plan.sample(shifted, self.t0_ns)
+
+
+@dataclass(frozen=True, slots=True)
+class Scenario:
+    """Everything a run of one scenario needs.
+
+    Attributes
+    ----------
+    name : str
+    drive : Drive
+        Odometry and truth (truth spliced for a kidnap).
+    observation : ObservationConfig
+    world : World
+        The world the tags really are in (observations come from it).
+    tag_map : TagMap
+        The map the localizer is given (from the world as surveyed).
+    camera_stamps_ns : (M,) int64
+        Frames that exist (dropout removes some).
+    kidnaps_ns : list of int
+    """
+
+    name: str
+    drive: Drive
+    observation: ObservationConfig
+    world: World
+    tag_map: TagMap
+    camera_stamps_ns: npt.NDArray[np.int64]
+    kidnaps_ns: list[int]
+
+
+def tag_map_from_world(world: World) -> TagMap:
+    """The surveyed tag map of ``world``: every tag's pose in ``map`` (cab tags included, the
+    cab standing still)."""
+    return TagMap.from_entries(
+        TagEntry.from_pose(t.id, world.T_map_tag(t), t.size, family=t.family, note=t.note or "")
+        for t in world.tags
+    )
+
+
+def build_scenario(
+    name: str,
+    seed: int = 0,
+    duration_s: float | None = None,
+    world: World | None = None,
+) -> Scenario:
+    """Build scenario ``name`` (a key of :data:`SCENARIOS`).
+
+    Parameters
+    ----------
+    name : str
+    seed : int
+        Odometry and observation-noise seed.
+    duration_s : float, optional
+        Keep only the first ``duration_s`` seconds of the drive (default: all of it, ~700 s).
+    world : World, optional
+        Default: the built-in office world.
+
+    Raises
+    ------
+    SimulationError
+        For an unknown name (the message lists the known ones).
+    """
+    spec = SCENARIOS.get(name)
+    if spec is None:
+        raise SimulationError(f"unknown scenario {name!r} (known: {', '.join(SCENARIOS)})")
+    base = world or load_default_world()
+    surveyed = base.model_copy(
+        update={"tags": tuple(t for t in base.tags if t.id not in spec.remove_tags)}
+    )
+    true_world = _move_tags(surveyed, spec.moved_tags)
+    drive = simulate_drive(surveyed, seed=seed)
+    kidnaps: list[int] = []
+    if spec.kidnap_at_s is not None:
+        drive = _splice(drive, spec.kidnap_at_s, spec.kidnap_skip_s)
+        kidnaps.append(drive.t0_ns + round(spec.kidnap_at_s * S_NS))
+    if duration_s is not None:
+        drive = _truncate(drive, duration_s)
+    if true_world is not surveyed:
+        drive = replace(drive, world=true_world)
+    stamps = drive.camera_stamps_ns
+    if spec.dropout_s is not None:
+        lo, hi = (drive.t0_ns + round(s * S_NS) for s in spec.dropout_s)
+        stamps = stamps[(stamps < lo) | (stamps > hi)]
+    obs = ObservationConfig(seed=seed, **spec.observation)
+    return Scenario(name, drive, obs, true_world, tag_map_from_world(surveyed), stamps, kidnaps)
+
+
+def _move_tags(world: World, moves: dict[int, tuple[float, float]]) -> World:
+    if not moves:
+        return world
+    tags = []
+    for tag in world.tags:
+        if tag.id in moves and tag.wall is not None:
+            dx, dy = moves[tag.id]
+            wall = WallMount(x=tag.wall.x + dx, y=tag.wall.y + dy, yaw_deg=tag.wall.yaw_deg,
+                             height=tag.wall.height)  # fmt: skip
+            tag = tag.model_copy(update={"wall": wall})
+        tags.append(tag)
+    return world.model_copy(update={"tags": tuple(tags)})
+
+
+def _splice(drive: Drive, kidnap_at_s: float, skip_s: float) -> SplicedDrive:
+    """Truth from ``kidnap_at`` on is the route ``skip_s`` later; odometry keeps its own path
+    (the increments of the skipped-to stretch) without a jump."""
+    step = int(drive.stamps_ns[1] - drive.stamps_ns[0])
+    k = int(np.searchsorted(drive.stamps_ns, drive.t0_ns + round(kidnap_at_s * S_NS)))
+    skip = round(skip_s * S_NS / step)
+    n = len(drive.stamps_ns) - skip
+    if k >= n:
+        raise SimulationError(f"kidnap at {kidnap_at_s} s + {skip_s} s is past the drive's end")
+    idx = np.concatenate([np.arange(k), np.arange(k, n) + skip])
+    T_odom = drive.T_odom_base
+    T_odom_after = T_odom[k - 1] @ T_odom[k - 1 + skip].inverse() @ T_odom[idx[k:]]
+    T_odom_base = SE3.stack([*T_odom[:k], *T_odom_after])
+    stamps = drive.stamps_ns[:n]
+    cams = drive.camera_stamps_ns[drive.camera_stamps_ns <= stamps[-1]]
+    return SplicedDrive(
+        world=drive.world, stamps_ns=stamps, T_map_base=drive.T_map_base[idx],
+        T_odom_base=T_odom_base, camera_stamps_ns=cams, distance_m=drive.distance_m[idx],
+        trajectory=drive.trajectory, plan=drive.plan, t0_ns=drive.t0_ns, seed=drive.seed,
+        kidnap_ns=int(stamps[k]), skip_ns=skip * step,
+    )  # fmt: skip
+
+
+def _truncate(drive: Drive, duration_s: float) -> Drive:
+    end = drive.t0_ns + round(duration_s * S_NS)
+    n = int(np.searchsorted(drive.stamps_ns, end, side="right"))
+    return replace(
+        drive,
+        stamps_ns=drive.stamps_ns[:n],
+        T_map_base=drive.T_map_base[:n],
+        T_odom_base=drive.T_odom_base[:n],
+        camera_stamps_ns=drive.camera_stamps_ns[drive.camera_stamps_ns <= drive.stamps_ns[n - 1]],
+        distance_m=drive.distance_m[:n],
+    )
+
+
+class ScenarioSource:
+    """A scenario as a :class:`~tagloc.messages.MessageSource` (the simulator's stream).
+
+    Yields, in stamp order: the camera's ``CameraInfoMsg`` and the static ``base -> camera``
+    transform at the start, then per odometry stamp an ``OdometryMsg`` and a ``GroundTruthMsg``,
+    and per camera frame a ``TagDetectionsMsg`` (before the odometry of the same stamp, as a
+    bag's log-time order has it).
+    :attr:`frame_truth` holds what only the simulator knows (glints, tags truly in view).
+    """
+
+    def __init__(self, scenario: Scenario, topics: PipelineTopics | None = None) -> None:
+        self.scenario, self.t = scenario, topics or PipelineTopics()
+        drive = scenario.drive
+        self.frames = list(
+            simulate_observations(
+                drive, scenario.observation, stamps_ns=scenario.camera_stamps_ns,
+                world=scenario.world,
+            )
+        )  # fmt: skip
+        self.frame_truth = {
+            f.stamp_ns: FrameTruth(
+                f.false_detection, min((s.range_m for s in f.truth), default=math.inf)
+            )
+            for f in self.frames
+        }
+        robot = scenario.world.robot
+        self.camera = robot.camera.camera_model()
+        self.T_base_cam = robot.camera.T_base_cam.T_base_cam()
+
+    @property
+    def topics(self) -> dict[str, type[Message]]:
+        """Stream topic -> record type."""
+        t = self.t
+        return {
+            t.odom: OdometryMsg, t.truth: GroundTruthMsg, t.detections: TagDetectionsMsg,
+            t.camera_info: CameraInfoMsg, TF_STATIC: TransformMsg,
+        }  # fmt: skip
+
+    def __iter__(self) -> Iterator[tuple[str, Message]]:
+        drive, t = self.scenario.drive, self.t
+        t0 = int(drive.stamps_ns[0])
+        yield t.camera_info, CameraInfoMsg(t0, CAMERA_FRAME, self.camera.to_camera_info())
+        yield TF_STATIC, TransformMsg(t0, BASE_FRAME, CAMERA_FRAME, self.T_base_cam, static=True)
+        frames = iter(self.frames)
+        frame = next(frames, None)
+        for i, stamp in enumerate(drive.stamps_ns.tolist()):
+            while frame is not None and frame.stamp_ns <= stamp:  # arrival order = stamp order
+                yield t.detections, TagDetectionsMsg(frame.stamp_ns, CAMERA_FRAME, frame.detections)
+                frame = next(frames, None)
+            T = drive.T_odom_base[i]
+            yield t.odom, OdometryMsg(stamp, ODOM_FRAME, BASE_FRAME, T, _ODOM_COV)
+            yield t.truth, GroundTruthMsg(stamp, MAP_FRAME, drive.T_map_base[i])
+
+
+def run_scenario(
+    name: str,
+    seed: int = 0,
+    duration_s: float | None = None,
+    *,
+    config: LocalizerConfig | None = None,
+    fiducial: FiducialConfig | None = None,
+) -> LocalizationRun:
+    """Simulate scenario ``name`` and localize it against the surveyed tag map.
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`SCENARIOS`.
+    seed : int
+        Odometry and observation seed.
+    duration_s : float, optional
+        Only the first ``duration_s`` s of the ~700 s route.
+    config : LocalizerConfig, optional
+        Filter tunables (default: ``LocalizerConfig()``).
+    fiducial : FiducialConfig, optional
+        Fix-source tunables.
+
+    Returns
+    -------
+    LocalizationRun
+        With ground truth, ``kidnaps_ns`` and ``metadata`` (scenario, seed, description,
+        distance travelled, glints injected).
+    """
+    return localize_scenario(build_scenario(name, seed, duration_s), config, fiducial)
+
+
+def localize_scenario(
+    scenario: Scenario,
+    config: LocalizerConfig | None = None,
+    fiducial: FiducialConfig | None = None,
+) -> LocalizationRun:
+    """Localize a built scenario (see :func:`run_scenario`) through the message stream."""
+    source = ScenarioSource(scenario)
+    config = config if config is not None else scenario_config()
+    # the tag sensor's noise model calibrated to the simulated detector (as one calibrates
+    # sigma_px on a real detector's corners)
+    noise = NoiseModel(sigma_px=max(scenario.observation.pixel_sigma_px, 0.05))
+    pipeline = LocalizationPipeline(
+        scenario.tag_map, config, fiducial=fiducial, frame_truth=source.frame_truth,
+        noise=noise, name=f"scenario:{scenario.name}",
+    )  # fmt: skip
+    run = pipeline.run(source)
+    run.kidnaps_ns = list(scenario.kidnaps_ns)
+    run.metadata.update(scenario_metadata(scenario, source))
+    return run
+
+
+def scenario_config() -> LocalizerConfig:
+    """The filter configuration of the scenarios: defaults, planar (the simulated robot walks a
+    flat floor, so z, roll and pitch of ``T_map_odom`` stay 0 and tag fixes' poorer z, roll and
+    pitch are not let into the estimate)."""
+    return LocalizerConfig.model_validate({"filter": {"planar": True}})
+
+
+def scenario_metadata(scenario: Scenario, source: ScenarioSource) -> dict[str, object]:
+    """Facts of a scenario for the run's ``metadata``."""
+    glints = sum(sum(f.false_detection) for f in source.frames)
+    return {
+        "scenario": scenario.name, "seed": scenario.drive.seed,
+        "description": SCENARIOS[scenario.name].description,
+        "distance_m": float(scenario.drive.distance_m[-1] - scenario.drive.distance_m[0]),
+        "duration_s": float(scenario.drive.stamps_ns[-1] - scenario.drive.stamps_ns[0]) / S_NS,
+        "n_camera_frames": len(source.frames), "glints_injected": int(glints),
+        "world": scenario.world.name,
+    }  # fmt: skip
