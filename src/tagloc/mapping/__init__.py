@@ -1,0 +1,45 @@
+"""Offline tag-map building: a factor graph in GTSAM from a survey drive, with a QA report.
+
+- :class:`Survey` (odometry + camera frames of detections + cameras + extrinsics + tag sizes)
+  from the simulator (:func:`survey_from_drive`) or a recorded stream
+  (:func:`survey_from_messages`).
+- :func:`build_tag_map` -> ``(TagMap, BuildReport)``; :func:`build_map_from_drive` for a
+  simulated drive, :func:`map_errors` against the simulated world.
+- :class:`MapBuildConfig`: the tunables.
+
+Errors are :class:`MappingError`.
+"""
+
+from tagloc.mapping.builder import build_tag_map
+from tagloc.mapping.config import MapBuildConfig, OdometryNoise
+from tagloc.mapping.report import BuildReport, TagQA
+from tagloc.mapping.sim_survey import MapErrors, build_map_from_drive, map_errors, survey_from_drive
+from tagloc.mapping.stream_survey import (
+    RigConfig,
+    corner_rotation_by_gravity,
+    parse_camera_poses,
+    parse_tagslam,
+    survey_from_messages,
+)
+from tagloc.mapping.survey import CameraFrame, MappingError, Survey, only_cameras
+
+__all__ = [
+    "BuildReport",
+    "CameraFrame",
+    "MapBuildConfig",
+    "MapErrors",
+    "MappingError",
+    "OdometryNoise",
+    "RigConfig",
+    "Survey",
+    "TagQA",
+    "build_map_from_drive",
+    "build_tag_map",
+    "corner_rotation_by_gravity",
+    "map_errors",
+    "only_cameras",
+    "parse_camera_poses",
+    "parse_tagslam",
+    "survey_from_drive",
+    "survey_from_messages",
+]

@@ -1,0 +1,228 @@
+"""The factor graph in GTSAM: keyframe and tag poses, odometry and PnP pose factors, anchors.
+
+Variables: ``x_k`` = ``T_map_base`` of keyframe ``k``; ``l_j`` = ``T_map_tag`` of tag ``j``
+(both ``Pose3``). Factors:
+
+- odometry ``BetweenFactorPose3(x_{k-1}, x_k, T_odom_base_{k-1}^-1 T_odom_base_k)``, diagonal
+  noise from :class:`~tagloc.mapping.config.OdometryNoise` (variance linear in distance and
+  rotation travelled, plus a floor), under a Huber kernel (``odometry_robust_k``: convex, so
+  the trajectory cannot tear, but a one-frame odometry jump has bounded pull);
+- tag observation ``BetweenFactorPose3(x_k, l_j, T_base_tag)`` with the PnP covariance of the
+  chosen IPPE branch (right tangent, so the factor's error ``Log(Z^-1 x_k^-1 l_j)`` has exactly
+  that covariance), under a Huber or Cauchy kernel so that outliers cannot fold the map;
+- ``PriorFactorPose3`` on anchor tags.
+
+Solved with Levenberg-Marquardt; tag covariances from ``gtsam.Marginals``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+
+import gtsam
+import numpy as np
+import numpy.typing as npt
+
+from tagloc.geometry import SE3
+from tagloc.mapping.config import MapBuildConfig, OdometryNoise
+from tagloc.mapping.gtsam_bridge import PERM, cov_from_gtsam, diagonal_sigmas
+from tagloc.mapping.initialize import inverse_h, rotation_angle
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+
+def X(k: int) -> int:
+    """Key of keyframe ``k``'s ``T_map_base``."""
+    return int(gtsam.symbol("x", k))
+
+
+def L(j: int) -> int:
+    """Key of tag ``j``'s ``T_map_tag``."""
+    return int(gtsam.symbol("l", j))
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class GraphInput:
+    """Everything the graph needs, as arrays (a survey after PnP, or a synthetic benchmark).
+
+    Attributes
+    ----------
+    M_odom_base : (K, 4, 4) float
+        Odometry at the keyframes.
+    keyframe, tag : (M,) int
+        Keyframe and tag index of each observation.
+    M_base_tag : (M, 4, 4) float
+        Measured ``T_base_tag`` (the chosen IPPE branch).
+    cov_base_tag : (M, 6, 6) float
+        Its right-tangent covariance, ``[x, y, z, rx, ry, rz]``.
+    M_map_anchor : mapping of int to (4, 4) float
+        Anchor tags' surveyed ``T_map_tag``; empty: the first initial tag is held as the origin.
+    M_map_base_init : (K, 4, 4) float
+    M_map_tag_init : mapping of int to (4, 4) float
+    """
+
+    M_odom_base: FloatArray
+    keyframe: IntArray
+    tag: IntArray
+    M_base_tag: FloatArray
+    cov_base_tag: FloatArray
+    M_map_anchor: Mapping[int, FloatArray]
+    M_map_base_init: FloatArray
+    M_map_tag_init: Mapping[int, FloatArray]
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class GraphSolution:
+    """Optimized poses, tag covariances and per-observation whitened errors.
+
+    Attributes
+    ----------
+    M_map_base : (K, 4, 4) float
+    M_map_tag : dict of int to (4, 4) float
+    cov_map_tag : dict of int to (6, 6) float
+        Marginal covariance of each tag, right tangent, ``[x, y, z, rx, ry, rz]`` (empty if not
+        computed).
+    mahalanobis : (M,) float
+        ``sqrt(e^T C^-1 e)`` of each tag factor at the solution (no kernel).
+    iterations : int
+    error_initial, error_final : float
+        Graph error (robust) before and after.
+    optimize_s, marginals_s : float
+        Wall time in GTSAM's optimizer and in ``Marginals``.
+    graph, values : gtsam.NonlinearFactorGraph, gtsam.Values
+        The graph and its optimum (for :func:`marginal_covariances`).
+    """
+
+    M_map_base: FloatArray
+    M_map_tag: dict[int, FloatArray]
+    cov_map_tag: dict[int, FloatArray]
+    mahalanobis: FloatArray
+    iterations: int
+    error_initial: float
+    error_final: float
+    optimize_s: float
+    marginals_s: float
+    graph: gtsam.NonlinearFactorGraph
+    values: gtsam.Values
+
+
+def odometry_sigmas(M_odom_base: FloatArray, noise: OdometryNoise) -> FloatArray:
+    """``(K-1, 6)`` standard deviations ``[x, y, z, rx, ry, rz]`` of consecutive odometry steps."""
+    step = inverse_h(M_odom_base[:-1]) @ M_odom_base[1:]
+    dist = np.linalg.norm(step[:, :3, 3], axis=1)
+    angle = rotation_angle(np.broadcast_to(np.eye(3), step[:, :3, :3].shape), step[:, :3, :3])
+    var_t = noise.translation_var_per_m * dist + noise.translation_var_per_rad * angle
+    var_r = noise.rotation_var_per_m * dist + noise.rotation_var_per_rad * angle
+    var_t += noise.translation_floor_m**2
+    var_r += noise.rotation_floor_rad**2
+    v = noise.vertical_factor**2
+    sigmas = np.sqrt(np.column_stack([var_t, var_t, v * var_t, v * var_r, v * var_r, var_r]))
+    return np.asarray(sigmas, dtype=np.float64)
+
+
+def _kernel(config: MapBuildConfig, k: float) -> gtsam.noiseModel.mEstimator.Base:
+    if config.robust == "huber":
+        return gtsam.noiseModel.mEstimator.Huber.Create(k)
+    return gtsam.noiseModel.mEstimator.Cauchy.Create(k)
+
+
+def _pose3(M: FloatArray) -> gtsam.Pose3:
+    return gtsam.Pose3(gtsam.Rot3(M[:3, :3]), M[:3, 3])
+
+
+def add_odometry_and_anchors(
+    graph: gtsam.NonlinearFactorGraph, data: GraphInput, config: MapBuildConfig
+) -> None:
+    """Odometry between consecutive keyframes, priors on anchors (or the origin tag)."""
+    steps = inverse_h(data.M_odom_base[:-1]) @ data.M_odom_base[1:]
+    k_odo = config.odometry_robust_k
+    odo_kernel = None if k_odo is None else gtsam.noiseModel.mEstimator.Huber.Create(k_odo)
+    for k, (M, sigmas) in enumerate(
+        zip(steps, odometry_sigmas(data.M_odom_base, config.odometry), strict=True)
+    ):
+        model = diagonal_sigmas(sigmas)
+        if odo_kernel is not None:
+            model = gtsam.noiseModel.Robust.Create(odo_kernel, model)
+        graph.add(gtsam.BetweenFactorPose3(X(k), X(k + 1), _pose3(M), model))
+    sigmas = [config.anchor_sigma_m] * 3 + [config.anchor_sigma_rad] * 3
+    anchors = dict(data.M_map_anchor) or {int(data.tag[0]): data.M_map_tag_init[int(data.tag[0])]}
+    for j, M in anchors.items():
+        graph.add(gtsam.PriorFactorPose3(L(j), _pose3(M), diagonal_sigmas(sigmas)))
+
+
+def build_graph(
+    data: GraphInput, config: MapBuildConfig
+) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
+    """The factor graph and initial values (module docstring)."""
+    graph = gtsam.NonlinearFactorGraph()
+    values = gtsam.Values()
+    for k, M in enumerate(data.M_map_base_init):
+        values.insert(X(k), _pose3(M))
+    for j, M in data.M_map_tag_init.items():
+        values.insert(L(j), _pose3(M))
+    add_odometry_and_anchors(graph, data, config)
+    # tag observations
+    kernel = _kernel(config, config.robust_k)
+    covs = data.cov_base_tag[:, PERM][:, :, PERM]
+    for k, j, M, cov in zip(data.keyframe, data.tag, data.M_base_tag, covs, strict=True):
+        model = gtsam.noiseModel.Robust.Create(kernel, gtsam.noiseModel.Gaussian.Covariance(cov))
+        graph.add(gtsam.BetweenFactorPose3(X(int(k)), L(int(j)), _pose3(M), model))
+    return graph, values
+
+
+def lm_params(config: MapBuildConfig) -> gtsam.LevenbergMarquardtParams:
+    """Levenberg-Marquardt settings used by :func:`solve_graph` (and the benchmark)."""
+    params = gtsam.LevenbergMarquardtParams()
+    params.setMaxIterations(config.max_iterations)
+    params.setRelativeErrorTol(1e-7)
+    params.setAbsoluteErrorTol(1e-9)
+    return params
+
+
+def mahalanobis(
+    M_map_base: FloatArray,
+    M_map_tag: Mapping[int, FloatArray],
+    data: GraphInput,
+) -> FloatArray:
+    """``(M,)`` Mahalanobis norm of each tag factor's error ``Log(Z^-1 x_k^-1 l_j)``."""
+    tags = np.array([M_map_tag[int(j)] for j in data.tag])
+    M_pred = inverse_h(M_map_base[data.keyframe]) @ tags
+    err = SE3.from_matrix(inverse_h(data.M_base_tag) @ M_pred, normalize=True).log()
+    sol = np.linalg.solve(data.cov_base_tag, err[..., None])[..., 0]
+    return np.asarray(np.sqrt(np.maximum(np.einsum("mi,mi->m", err, sol), 0.0)))
+
+
+def marginal_covariances(solution: GraphSolution) -> GraphSolution:
+    """``solution`` with the marginal covariance of every tag (``gtsam.Marginals``)."""
+    start = time.perf_counter()
+    marginals = gtsam.Marginals(solution.graph, solution.values)
+    cov = {j: cov_from_gtsam(marginals.marginalCovariance(L(j))) for j in solution.M_map_tag}
+    return replace(solution, cov_map_tag=cov, marginals_s=time.perf_counter() - start)
+
+
+def solve_graph(data: GraphInput, config: MapBuildConfig) -> GraphSolution:
+    """Build, optimize and read back the graph (no covariances: :func:`marginal_covariances`)."""
+    graph, values = build_graph(data, config)
+    optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, lm_params(config))
+    start = time.perf_counter()
+    result = optimizer.optimize()
+    optimize_s = time.perf_counter() - start
+    n_kf = len(data.M_map_base_init)
+    M_map_base = np.array([result.atPose3(X(k)).matrix() for k in range(n_kf)])
+    M_map_tag = {j: result.atPose3(L(j)).matrix() for j in data.M_map_tag_init}
+    return GraphSolution(
+        M_map_base=M_map_base,
+        M_map_tag=M_map_tag,
+        cov_map_tag={},
+        mahalanobis=mahalanobis(M_map_base, M_map_tag, data),
+        iterations=int(optimizer.iterations()),
+        error_initial=float(graph.error(values)),
+        error_final=float(graph.error(result)),
+        optimize_s=optimize_s,
+        marginals_s=0.0,
+        graph=graph,
+        values=result,
+    )

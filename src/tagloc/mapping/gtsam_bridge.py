@@ -1,0 +1,45 @@
+"""The one place where tagloc values meet GTSAM's (rotation-first tangent order).
+
+tagloc orders SE(3) tangents and covariances ``[x, y, z, rx, ry, rz]``; GTSAM's ``Pose3`` orders
+them ``[rx, ry, rz, x, y, z]``. Both perturb on the right (``T (+) d = T @ Exp(d)``), so a
+covariance only needs the block permutation :data:`PERM`.
+"""
+
+from __future__ import annotations
+
+import gtsam
+import numpy as np
+import numpy.typing as npt
+
+from tagloc.geometry import SE3
+
+FloatArray = npt.NDArray[np.float64]
+
+#: ``v_gtsam = v_tagloc[PERM]`` and ``C_gtsam = C_tagloc[PERM][:, PERM]``; the permutation is
+#: its own inverse.
+PERM = np.array([3, 4, 5, 0, 1, 2])
+
+
+def to_pose3(T: SE3) -> gtsam.Pose3:
+    """A single :class:`SE3` as a ``gtsam.Pose3``."""
+    return gtsam.Pose3(gtsam.Rot3(np.asarray(T.rotation.as_matrix())), np.asarray(T.translation))
+
+
+def from_pose3(pose: gtsam.Pose3) -> SE3:
+    """A ``gtsam.Pose3`` as a single :class:`SE3`."""
+    return SE3.from_matrix(pose.matrix(), normalize=True)
+
+
+def cov_to_gtsam(cov: npt.ArrayLike) -> FloatArray:
+    """``(6, 6)`` covariance ``[x, y, z, rx, ry, rz]`` to GTSAM's ``[rx, ry, rz, x, y, z]``."""
+    c = np.asarray(cov, dtype=np.float64)
+    return np.ascontiguousarray(c[PERM][:, PERM])
+
+
+cov_from_gtsam = cov_to_gtsam  # the permutation is an involution
+
+
+def diagonal_sigmas(sigmas: npt.ArrayLike) -> gtsam.noiseModel.Base:
+    """A GTSAM diagonal noise model from tagloc-ordered ``(6,)`` standard deviations."""
+    s = np.asarray(sigmas, dtype=np.float64)
+    return gtsam.noiseModel.Diagonal.Sigmas(np.ascontiguousarray(s[PERM]))

@@ -1,0 +1,204 @@
+"""The QA report of a map build: what a human reviews before committing ``tags.yaml``.
+
+Per tag: observation count, outliers (factors whose Mahalanobis error exceeds
+``outlier_sigma`` after optimization), RMS corner reprojection residual (pixels, inliers,
+through the real camera model at the optimized poses), position 1-sigma from the marginal
+covariance, and a flag when its outliers cluster on it (the signature of a tag that moved during
+the survey or an id printed twice). Per camera: the RMS residual. The keyframe trajectory before
+(odometry, aligned at the first keyframe) and after optimization.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from tagloc.camera import CameraModel
+from tagloc.geometry import SE3
+from tagloc.mapping.initialize import inverse_h
+from tagloc.mapping.observations import Observations
+from tagloc.tags.detection import tag_object_points
+
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True, slots=True)
+class TagQA:
+    """QA numbers of one mapped tag (see the module docstring); residuals in pixels."""
+
+    family: str
+    tag_id: int
+    observations: int
+    outliers: int
+    reproj_rms_px: float
+    position_sigma_m: float
+    cameras: tuple[str, ...]
+    anchor: bool
+    disagreeing: bool
+    tilt_ambiguous: bool = False
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class BuildReport:
+    """Result summary of :func:`tagloc.mapping.build_tag_map`.
+
+    Attributes
+    ----------
+    source : str
+    tags : tuple of TagQA
+    reproj_rms_px : float
+        Over all inlier corners.
+    reproj_rms_px_per_camera : dict of str to float
+    observations, outliers, keyframes : int
+    dropped : dict of str to int
+        Detections left out, by reason.
+    disagreeing_tags : tuple of int
+        Ids flagged as moved or duplicated.
+    keyframe_stamps_ns : (K,) int64
+    T_map_base_odometry, T_map_base_optimized : SE3 batch of K
+        Keyframe trajectory before (odometry) and after optimization.
+    iterations : int
+    error_initial, error_final : float
+    timings_s : dict of str to float
+        ``observations`` (PnP), ``initialize``, ``optimize`` (GTSAM LM, all rounds),
+        ``graph`` (building graphs and reading results), ``covariance``, ``report``, ``total``.
+    """
+
+    source: str
+    tags: tuple[TagQA, ...]
+    reproj_rms_px: float
+    reproj_rms_px_per_camera: dict[str, float]
+    observations: int
+    outliers: int
+    keyframes: int
+    dropped: dict[str, int]
+    disagreeing_tags: tuple[int, ...]
+    keyframe_stamps_ns: npt.NDArray[np.int64]
+    T_map_base_odometry: SE3
+    T_map_base_optimized: SE3
+    iterations: int
+    error_initial: float
+    error_final: float
+    timings_s: dict[str, float] = field(default_factory=dict)
+
+    def correction_m(self) -> FloatArray:
+        """``(K,)`` distance between odometry and optimized keyframe positions, m."""
+        return np.asarray(
+            np.linalg.norm(
+                self.T_map_base_odometry.translation - self.T_map_base_optimized.translation,
+                axis=-1,
+            )
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary (no trajectories)."""
+        return {
+            "source": self.source,
+            "keyframes": self.keyframes,
+            "observations": self.observations,
+            "outliers": self.outliers,
+            "dropped": self.dropped,
+            "reproj_rms_px": round(self.reproj_rms_px, 4),
+            "reproj_rms_px_per_camera": {
+                k: round(v, 4) for k, v in self.reproj_rms_px_per_camera.items()
+            },
+            "disagreeing_tags": list(self.disagreeing_tags),
+            "max_odometry_correction_m": round(float(self.correction_m().max()), 4),
+            "iterations": self.iterations,
+            "error_initial": self.error_initial,
+            "error_final": self.error_final,
+            "timings_s": {k: round(v, 4) for k, v in self.timings_s.items()},
+            "tags": [
+                {
+                    "id": t.tag_id,
+                    "family": t.family,
+                    "observations": t.observations,
+                    "outliers": t.outliers,
+                    "reproj_rms_px": round(t.reproj_rms_px, 4),
+                    "position_sigma_mm": round(1000 * t.position_sigma_m, 3),
+                    "cameras": list(t.cameras),
+                    "anchor": t.anchor,
+                    "disagreeing": t.disagreeing,
+                    "tilt_ambiguous": t.tilt_ambiguous,
+                }
+                for t in self.tags
+            ],
+        }
+
+    def to_json(self) -> str:
+        """:meth:`to_dict` as indented JSON."""
+        return json.dumps(self.to_dict(), indent=2) + "\n"
+
+    def summary_lines(self) -> list[str]:
+        """A few lines for the terminal."""
+        per_cam = ", ".join(f"{k} {v:.2f} px" for k, v in self.reproj_rms_px_per_camera.items())
+        t = self.timings_s
+        return [
+            f"{self.source}: {len(self.tags)} tags from {self.observations} observations in "
+            f"{self.keyframes} keyframes ({self.outliers} outliers)",
+            f"reprojection RMS {self.reproj_rms_px:.2f} px ({per_cam})",
+            f"odometry corrected by up to {self.correction_m().max():.2f} m; "
+            f"{self.iterations} LM iterations, error {self.error_initial:.4g} -> "
+            f"{self.error_final:.4g}",
+            "disagreeing tags (moved or duplicated?): "
+            + (", ".join(str(i) for i in self.disagreeing_tags) or "none"),
+            "tilt ambiguous (seen only face-on or far; check their orientation): "
+            + (", ".join(str(t.tag_id) for t in self.tags if t.tilt_ambiguous) or "none"),
+            f"time {t.get('total', 0.0):.2f} s (PnP {t.get('observations', 0.0):.2f} s, "
+            f"optimize {t.get('optimize', 0.0):.2f} s, "
+            f"covariance {t.get('covariance', 0.0):.2f} s)",
+        ]
+
+    def to_markdown(self) -> str:
+        """The summary and a per-tag table, as Markdown."""
+        lines = ["# Tag map build report", "", *(f"- {line}" for line in self.summary_lines())]
+        lines += [
+            "",
+            "| tag | obs | outliers | reproj RMS px | sigma mm | cameras | note |",
+            "|---:|---:|---:|---:|---:|---|---|",
+        ]
+        for t in self.tags:
+            note = "anchor" if t.anchor else ("DISAGREES" if t.disagreeing else "")
+            note += " tilt ambiguous" if t.tilt_ambiguous else ""
+            lines.append(
+                f"| {t.tag_id} | {t.observations} | {t.outliers} | {t.reproj_rms_px:.2f} | "
+                f"{1000 * t.position_sigma_m:.1f} | {' '.join(t.cameras)} | {note} |"
+            )
+        return "\n".join(lines) + "\n"
+
+
+def reprojection_residuals(
+    obs: Observations,
+    M_map_base: FloatArray,
+    M_map_tag: Mapping[int, FloatArray],
+    cameras: Mapping[str, CameraModel],
+    T_base_cam: Mapping[str, SE3],
+) -> FloatArray:
+    """``(M,)`` RMS corner reprojection residual of each observation at the given poses, px."""
+    rms = np.full(len(obs), np.nan)
+    cams = np.array(obs.camera)
+    tags = np.array([M_map_tag[int(j)] for j in obs.tag])
+    M_base_tag = inverse_h(M_map_base[obs.keyframe]) @ tags
+    for name in np.unique(cams):
+        idx = np.flatnonzero(cams == name)
+        M_cam_tag = inverse_h(T_base_cam[str(name)].as_matrix())[None] @ M_base_tag[idx]
+        points_tag = tag_object_points(1.0)[None] * obs.tag_sizes[obs.tag[idx]][:, None, None]
+        points_cam = (
+            np.einsum("mij,mnj->mni", M_cam_tag[:, :3, :3], points_tag) + M_cam_tag[:, None, :3, 3]
+        )
+        with np.errstate(all="ignore"):
+            px = cameras[str(name)].project(points_cam.reshape(-1, 3)).reshape(-1, 4, 2)
+        err = np.linalg.norm(px - obs.corners_px[idx], axis=2)
+        rms[idx] = np.sqrt(np.mean(err**2, axis=1))
+    return rms
+
+
+def rms(values: FloatArray) -> float:
+    """Root mean square of the finite values (NaN if none)."""
+    v = values[np.isfinite(values)]
+    return float(np.sqrt(np.mean(v**2))) if len(v) else float("nan")
