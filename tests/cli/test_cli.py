@@ -25,15 +25,16 @@ def _tagloc(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[
     )
 
 
-def test_demo_writes_plot_and_world_and_reports_drift(tmp_path: Path) -> None:
+def test_demo_writes_plot_and_world_and_reports_drift_and_localization(tmp_path: Path) -> None:
     out = tmp_path / "out"
-    result = _tagloc("demo", "--out", str(out))
+    result = _tagloc("demo", "--out", str(out), "--duration", "60")
     assert result.returncode == 0, result.stderr
     png = (out / "drive.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 50_000
     # the world written beside the result is the one that was driven, and reloads identically
     assert load_world(out / "world.yaml") == load_default_world()
     assert "end-point drift" in result.stdout and "ATE RMSE" in result.stdout
+    assert "fused ATE RMSE" in result.stdout and "largest correction jump" in result.stdout
     assert sorted(p.name for p in out.iterdir()) == ["drive.png", "world.yaml"]
 
 

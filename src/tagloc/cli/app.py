@@ -7,6 +7,7 @@ from typing import Annotated
 
 import typer
 
+from tagloc.cli import localize_cmd
 from tagloc.cli.eval_cmd import eval_app
 from tagloc.cli.map_cmd import map_app
 
@@ -21,6 +22,7 @@ world_app = typer.Typer(help="Simulated worlds: check a world file.", no_args_is
 app.add_typer(world_app, name="world")
 app.add_typer(map_app, name="map")
 app.add_typer(eval_app, name="eval")
+app.command("localize")(localize_cmd.localize)
 
 WorldOption = Annotated[
     Path | None,
@@ -33,11 +35,12 @@ def demo(
     out: Annotated[Path, typer.Option(help="Output directory.")] = Path("out"),
     world: WorldOption = None,
     seed: Annotated[int | None, typer.Option(help="Override the odometry seed.")] = None,
+    duration: Annotated[float | None, typer.Option(help="Only the first N s.")] = None,
 ) -> None:
-    """Simulate the default building drive and report how far the odometry drifts."""
+    """Simulate the default building drive, localize it against the tag map, report."""
     from tagloc.cli.demo import run_demo
 
-    run_demo(out=out, world_path=world, seed=seed)
+    run_demo(out=out, world_path=world, seed=seed, duration_s=duration)
 
 
 @world_app.command("check")

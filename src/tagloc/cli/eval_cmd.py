@@ -1,13 +1,115 @@
 """``tagloc eval``: evaluation commands (each a few lines around a pure function).
 
-Sub-commands register themselves on :data:`eval_app` from their own modules.
+- ``tagloc eval run --scenario NAME --out DIR``: simulate and localize a scenario, then write
+  the evaluation (``report.html``, ``summary.json``, TUM files) and print the checks.
+- ``tagloc eval files --truth truth.tum --est fused.tum [--est ...]``: ATE and RPE (via evo) of
+  TUM trajectories against a reference, e.g. the files ``tagloc localize`` wrote.
+
+Sub-commands may also register themselves on :data:`eval_app` from their own modules.
 """
 
 from __future__ import annotations
 
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated
+
 import typer
+
+if TYPE_CHECKING:
+    from tagloc.eval.summary import EvalSummary
 
 eval_app = typer.Typer(
     help="Evaluate: localization runs against ground truth, the tag sensor by sweep.",
     no_args_is_help=True,
 )
+
+
+@eval_app.command("run")
+def eval_run(
+    scenario: Annotated[str, typer.Option(help="Simulated scenario (default, kidnap, ...).")],
+    out: Annotated[Path, typer.Option(help="Output directory.")] = Path("out/eval"),
+    seed: Annotated[int, typer.Option(help="Scenario seed.")] = 0,
+    duration: Annotated[float | None, typer.Option(help="First N s only.")] = None,
+    range_m: Annotated[float, typer.Option(help="Z: opportunity range, m.")] = 3.0,
+    position_cm: Annotated[float, typer.Option(help="X: position tolerance, cm.")] = 5.0,
+    rotation_deg: Annotated[float, typer.Option(help="Y: rotation tolerance, deg.")] = 2.0,
+    strict: Annotated[bool, typer.Option("--strict", help="Exit 2 if a check fails.")] = False,
+) -> None:
+    """Localize a simulated scenario and write its evaluation report to OUT."""
+    from tagloc.eval import EvalConfig, write_report
+    from tagloc.sim.scenarios import run_scenario
+
+    config = EvalConfig(
+        opportunity_range_m=range_m,
+        position_tol_m=position_cm / 100.0,
+        rotation_tol_deg=rotation_deg,
+    )
+    run = run_scenario(scenario, seed=seed, duration_s=duration)
+    summary = write_report(run, out, config=config)
+    print_summary(summary)
+    typer.echo(f"wrote report.html, summary.json and TUM files to {out}")
+    if strict and not summary.passed:
+        raise typer.Exit(2)
+
+
+def print_summary(summary: EvalSummary) -> None:
+    """The estimators' headline numbers and the checks, as two rich tables."""
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=f"{summary.name}: estimates of T_map_base")
+    for column in ("estimate", "ATE RMSE (m)", "largest jump (m)", "false fixes", "reliability"):
+        table.add_column(column, justify="right")
+    for name, e in summary.estimators.items():
+        reliability = "" if e.reliability is None else f"{e.reliability.fraction:.4f}"
+        false = "" if e.false_fixes_accepted is None else str(e.false_fixes_accepted)
+        table.add_row(name, f"{e.ate_rmse_m:.4f}", f"{e.largest_jump_m:.3f}", false, reliability)
+    checks = Table(title="checks")
+    for column in ("check", "value", "target", "result"):
+        checks.add_column(column, justify="right")
+    for c in summary.checks:
+        result = {True: "[green]pass[/]", False: "[red]FAIL[/]", None: "n/a"}[c.passed]
+        checks.add_row(c.name, _num(c.value, 4, "g"), c.target, result)
+    console = Console()
+    console.print(table)
+    console.print(checks)
+
+
+def _num(value: float, digits: int, kind: str = "f") -> str:
+    return f"{value:.{digits}{kind}}" if math.isfinite(value) else "n/a"
+
+
+@eval_app.command("files")
+def eval_files(
+    truth: Annotated[Path, typer.Option(help="Reference TUM file (ground truth).")],
+    est: Annotated[list[Path], typer.Option(help="Estimate TUM file (repeatable).")],
+    delta_m: Annotated[float, typer.Option(help="RPE pair spacing, m of truth path.")] = 1.0,
+    max_diff_s: Annotated[float, typer.Option(help="Stamp association tolerance, s.")] = 0.01,
+    align: Annotated[bool, typer.Option("--align", help="SE(3)-align first (evo -a).")] = False,
+) -> None:
+    """ATE and RPE (evo) of TUM trajectories against a reference TUM trajectory."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from tagloc.eval.compare import compare_trajectories
+    from tagloc.io import read_tum
+
+    stamps_ref_ns, T_map_base_ref = read_tum(truth)
+    table = Table(title=f"against {truth}" + (" (aligned)" if align else ""))
+    for column in ("estimate", "matched", "ATE RMSE (m)", "ATE max (m)",
+                   f"RPE/{delta_m:g} m (m)", "RPE rot (deg)"):  # fmt: skip
+        table.add_column(column, justify="right")
+    for path in est:
+        stamps_est_ns, T_map_base_est = read_tum(path)
+        result = compare_trajectories(
+            stamps_ref_ns, T_map_base_ref, stamps_est_ns, T_map_base_est,
+            max_diff_s=max_diff_s, delta_m=delta_m, align=align,
+        )  # fmt: skip
+        rpe = result.rpe
+        table.add_row(
+            str(path), str(result.n_matched), f"{result.ate.rmse:.6f}", f"{result.ate.max:.6f}",
+            "n/a" if rpe is None else f"{rpe.translation_rmse_m:.6f}",
+            "n/a" if rpe is None else f"{rpe.rotation_rmse_deg:.4f}",
+        )  # fmt: skip
+    Console(width=160).print(table)

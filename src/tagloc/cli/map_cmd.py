@@ -11,11 +11,18 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-map_app = typer.Typer(help="Tag maps (tags.yaml): check one, compare two.", no_args_is_help=True)
+if TYPE_CHECKING:
+    from tagloc.geometry import SE3
+    from tagloc.mapping import Survey
+
+map_app = typer.Typer(
+    help="Tag maps (tags.yaml): build one from a survey, check one, compare two.",
+    no_args_is_help=True,
+)
 
 MapFile = Annotated[Path, typer.Argument(help="Tag map YAML file.", show_default=False)]
 
@@ -51,3 +58,202 @@ def map_diff(
     typer.echo("\n".join(format_tag_map_diff(diff)) or f"no differences: {old} {new}")
     if exit_code and not diff.is_empty:
         raise typer.Exit(code=1)
+
+
+# ----- tagloc map build ---------------------------------------------------------------------------
+def _read_text(path: Path, what: str) -> str:
+    from tagloc.mapping import MappingError
+
+    try:
+        return path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise MappingError(f"{path}: cannot read the {what} ({exc.__class__.__name__})") from None
+
+
+def _pairs(values: list[str], option: str, convert: type) -> dict[str, object]:
+    from tagloc.mapping import MappingError
+
+    out: dict[str, object] = {}
+    for value in values:
+        key, sep, raw = value.partition("=")
+        try:
+            if not sep or not key:
+                raise ValueError
+            out[key] = convert(raw)
+        except ValueError:
+            raise MappingError(f"{option} {value!r}: expected KEY=VALUE") from None
+    return out
+
+
+def _tag_topics(cameras_yaml: Path, given: list[str]) -> dict[str, str]:
+    """``topic -> camera`` from ``--tag-topic CAM=TOPIC`` or the camchain's ``tagtopic`` keys."""
+    from tagloc.config import parse_yaml_mapping
+
+    if given:
+        return {str(topic): cam for cam, topic in _pairs(given, "--tag-topic", str).items()}
+    data = parse_yaml_mapping(_read_text(cameras_yaml, "camera file"), str(cameras_yaml))
+    return {
+        str(entry["tagtopic"]): str(name)
+        for name, entry in data.items()
+        if isinstance(entry, dict) and "tagtopic" in entry
+    }
+
+
+def _bag_survey(
+    bag: Path,
+    cameras_yaml: Path,
+    camera_poses: Path | None,
+    tagslam: Path | None,
+    tag_topics: list[str],
+    odom_topic: str,
+    corner_order: str,
+    tag_size: float | None,
+    sizes: dict[int, float],
+) -> tuple[Survey, dict[int, SE3]]:
+    from tagloc.geometry import SE3
+    from tagloc.io import BagSource, load_kalibr_cameras
+    from tagloc.mapping import MappingError
+    from tagloc.mapping.stream_survey import parse_camera_poses, parse_tagslam, survey_from_messages
+
+    cameras = load_kalibr_cameras(cameras_yaml)
+    topics = _tag_topics(cameras_yaml, tag_topics)
+    if not topics:
+        raise MappingError(
+            f"{cameras_yaml}: no camera has a 'tagtopic'; give --tag-topic CAM=TOPIC"
+        )
+    unknown = sorted(set(topics.values()) - set(cameras))
+    if unknown:
+        raise MappingError(f"--tag-topic: camera {unknown[0]!r} is not in {cameras_yaml}")
+    if camera_poses is not None:
+        T_base_cam = parse_camera_poses(_read_text(camera_poses, "camera poses"), str(camera_poses))
+    elif len(cameras) == 1:
+        T_base_cam = {name: SE3.identity() for name in cameras}
+    else:
+        raise MappingError(f"{cameras_yaml}: several cameras: give --camera-poses (extrinsics)")
+    rig = None
+    if tagslam is not None:
+        rig = parse_tagslam(_read_text(tagslam, "tagslam configuration"), str(tagslam))
+    source = BagSource(
+        bag, [*topics, odom_topic], corner_order=corner_order, default_family="tag36h11"
+    )
+    survey = survey_from_messages(
+        source,
+        topics,
+        odom_topic,
+        cameras,
+        T_base_cam,
+        T_child_base=None if rig is None or rig.T_body_odom is None else rig.T_body_odom.inverse(),
+        tag_sizes={
+            ("tag36h11", i): s for i, s in {**(rig.tag_sizes if rig else {}), **sizes}.items()
+        },
+        default_tag_size=tag_size
+        if tag_size is not None
+        else (rig.default_tag_size if rig else None),
+        ignore_tags=rig.ignore_tags if rig else (),
+        source=str(bag),
+    )
+    return survey, dict(rig.anchors) if rig else {}
+
+
+@map_app.command("build")
+def map_build(
+    out: Annotated[Path, typer.Option("--out", help="Tag map to write (tags.yaml).")],
+    bag: Annotated[Path | None, typer.Option(help="Bag with odometry and tag detections.")] = None,
+    sim: Annotated[bool, typer.Option("--sim", help="Map a simulated survey drive.")] = False,
+    world: Annotated[Path | None, typer.Option(help="World for --sim (default office).")] = None,
+    seed: Annotated[int, typer.Option(help="Odometry and detector seed for --sim.")] = 1,
+    camera_stride: Annotated[int, typer.Option(help="Use every n-th camera frame.")] = 1,
+    cameras: Annotated[Path | None, typer.Option(help="Kalibr cameras.yaml (with --bag).")] = None,
+    camera_poses: Annotated[
+        Path | None, typer.Option(help="camera_poses.yaml: T_body_cam of each camera.")
+    ] = None,
+    tagslam: Annotated[
+        Path | None, typer.Option(help="tagslam.yaml: anchors, T_body_odom, ignored ids.")
+    ] = None,
+    tag_topic: Annotated[
+        list[str], typer.Option(help="CAM=TOPIC (repeat); default: cameras.yaml tagtopic.")
+    ] = [],  # noqa: B006 - typer needs a literal default
+    odom_topic: Annotated[str, typer.Option(help="Odometry topic.")] = "/odom",
+    corner_order: Annotated[
+        str, typer.Option(help="How the bag lists corners, e.g. bl_br_tr_tl.")
+    ] = "tl_tr_br_bl",
+    anchor: Annotated[list[int], typer.Option(help="Anchor tag id (repeat).")] = [],  # noqa: B006
+    anchors: Annotated[
+        Path | None, typer.Option(help="tags.yaml whose entries give anchor poses.")
+    ] = None,
+    tag_size: Annotated[float | None, typer.Option(help="Default tag edge, m.")] = None,
+    size: Annotated[list[str], typer.Option(help="ID=EDGE_M per tag (repeat).")] = [],  # noqa: B006
+    report: Annotated[Path | None, typer.Option(help="QA report file (.json or .md).")] = None,
+    calibrate_odometry: Annotated[
+        int | None,
+        typer.Option(help="Odometry self-calibration rounds (default: 3 with --sim, else 0)."),
+    ] = None,
+) -> None:
+    """Build a tag map from a survey drive (a bag, or --sim) and print its QA report."""
+    from rich.progress import Progress
+
+    from tagloc.fileutil import atomic_write_text
+    from tagloc.mapping import MapBuildConfig, MappingError, build_map_from_drive, build_tag_map
+    from tagloc.tags.tagmap import load_tag_map, save_tag_map
+
+    if sim == (bag is not None):
+        raise MappingError("give exactly one of --bag PATH or --sim")
+    try:
+        sizes = {int(k): float(str(v)) for k, v in _pairs(size, "--size", float).items()}
+    except ValueError:
+        raise MappingError(f"--size {size}: expected ID=EDGE_M with an integer id") from None
+    rounds = calibrate_odometry if calibrate_odometry is not None else (3 if sim else 0)
+    config = MapBuildConfig(calibration_rounds=max(0, rounds))
+    with Progress(transient=True) as bar:
+        task = bar.add_task("mapping", total=1.0)
+
+        def progress(stage: str, done: int, total: int) -> None:
+            bar.update(task, description=stage, completed=done / max(total, 1))
+
+        if sim:
+            from tagloc.sim import ObservationConfig, load_default_world, load_world, simulate_drive
+
+            sim_world = load_world(world) if world is not None else load_default_world()
+            drive = simulate_drive(sim_world, seed=seed)
+            tag_map, qa = build_map_from_drive(
+                drive,
+                ObservationConfig(seed=seed),
+                anchors=anchor or None,
+                config=config,
+                camera_stride=camera_stride,
+                progress=progress,
+            )
+        else:
+            from tagloc.geometry import SE3
+
+            if cameras is None:
+                raise MappingError("--bag needs --cameras cameras.yaml")
+            assert bag is not None
+            survey, known = _bag_survey(
+                bag,
+                cameras,
+                camera_poses,
+                tagslam,
+                tag_topic,
+                odom_topic,
+                corner_order,
+                tag_size,
+                sizes,
+            )
+            if anchors is not None:
+                known.update({e.id: e.T_frame_tag() for e in load_tag_map(anchors)})
+            chosen = anchor or sorted(known)
+            missing = [i for i in chosen if i not in known]
+            if missing and len(chosen) > 1:
+                raise MappingError(
+                    f"--anchor {missing[0]}: no pose known (give --anchors or --tagslam)"
+                )
+            # one anchor without a known pose defines the map frame (identity pose)
+            T_map_anchor = {i: known.get(i, SE3.identity()) for i in chosen}
+            tag_map, qa = build_tag_map(survey, T_map_anchor, config, progress)
+    save_tag_map(tag_map, out)
+    if report is not None:
+        text = qa.to_json() if report.suffix == ".json" else qa.to_markdown()
+        atomic_write_text(report, text)
+    typer.echo("\n".join(qa.summary_lines()))
+    typer.echo(f"wrote {out} ({tag_map.summary()})")

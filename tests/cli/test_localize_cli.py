@@ -1,0 +1,95 @@
+"""``tagloc localize``: scenario and bag in, TUM / events / bag out; bad input is one line."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tagloc.cli.localize_cmd import write_stream_bag
+from tagloc.io import BagSource, read_tum
+from tagloc.sim.scenarios import ScenarioSource, build_scenario
+from tagloc.tags import save_tag_map
+
+
+def _tagloc(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-c", "from tagloc.cli import main; main()", *args],
+        capture_output=True,
+        text=True,
+        env={"MPLBACKEND": "Agg", "PATH": ""},
+        check=False,
+        timeout=300,
+    )
+
+
+@pytest.fixture(scope="module")
+def drive_bag(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """A 15 s simulated drive recorded to MCAP, and its tag map."""
+    root = tmp_path_factory.mktemp("bag")
+    scenario = build_scenario("default", seed=2, duration_s=15.0)
+    write_stream_bag(ScenarioSource(scenario), root / "drive.mcap")
+    save_tag_map(scenario.tag_map, root / "tags.yaml")
+    return root / "drive.mcap", root / "tags.yaml"
+
+
+def test_scenario_writes_tum_events_and_a_bag(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    result = _tagloc("localize", "--scenario", "default", "--duration", "15", "--out", str(out))
+    assert result.returncode == 0, result.stderr
+    names = {p.name for p in out.iterdir()}
+    assert {"fused.tum", "odometry.tum", "truth.tum", "events.jsonl", "fixes.jsonl"} <= names
+    assert {"localization.mcap", "localizer.yaml", "summary.txt"} <= names
+    assert not [n for n in names if n.startswith(".")]  # no temporary files left
+    stamps, T_fused = read_tum(out / "fused.tum")
+    _, T_truth = read_tum(out / "truth.tum")
+    err = np.linalg.norm(np.asarray(T_fused.translation) - T_truth.translation, axis=1)
+    assert len(stamps) == 1501 and np.sqrt(np.mean(err**2)) < 0.1
+    events = [json.loads(line) for line in (out / "events.jsonl").read_text().splitlines()]
+    assert events[0]["kind"] == "pending_consistency"
+    assert any(e["kind"] == "initialized" for e in events)
+    bag = BagSource(out / "localization.mcap")
+    assert set(bag.topics) == {"/tf", "/localization/pose"}
+    assert "ATE RMSE" in result.stdout
+
+
+def test_bag_input_localizes_like_the_scenario(
+    drive_bag: tuple[Path, Path], tmp_path: Path
+) -> None:
+    path, tags = drive_bag
+    out = tmp_path / "out"
+    result = _tagloc("localize", str(path), "--tags", str(tags), "--out", str(out), "--no-bag")
+    assert result.returncode == 0, result.stderr
+    _, T_fused = read_tum(out / "fused.tum")
+    _, T_truth = read_tum(out / "truth.tum")
+    err = np.linalg.norm(np.asarray(T_fused.translation) - T_truth.translation, axis=1)
+    assert np.sqrt(np.mean(err**2)) < 0.1
+    assert not (out / "localization.mcap").exists()
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        ((), "give exactly one input"),
+        (("--scenario", "default", "BAG"), "give exactly one input"),
+        (("BAG",), "--tags"),
+        (("BAG", "--tags", "TAGS", "--odom-topic", "/robot/odom"), "'/robot/odom'"),
+        (("--scenario", "volcano"), "unknown scenario 'volcano'"),
+        (("missing.mcap", "--tags", "TAGS"), "missing.mcap"),
+    ],
+)
+def test_bad_input_is_one_line_and_writes_nothing(
+    drive_bag: tuple[Path, Path], tmp_path: Path, args: tuple[str, ...], message: str
+) -> None:
+    path, tags = drive_bag
+    real = [str(path) if a == "BAG" else str(tags) if a == "TAGS" else a for a in args]
+    out = tmp_path / "out"
+    result = _tagloc("localize", *real, "--out", str(out))
+    assert result.returncode == 1, result.stdout
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0], result.stderr
+    assert not out.exists()
