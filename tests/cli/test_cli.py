@@ -80,7 +80,7 @@ def test_world_check_accepts_the_default_world() -> None:
     path = Path(tagloc.sim.__file__).parent / "worlds" / "office.yaml"
     result = _tagloc("world", "check", str(path))
     assert result.returncode == 0, result.stderr
-    assert "30 tags" in result.stdout
+    assert "37 tags" in result.stdout
 
 
 def test_demo_seed_changes_the_odometry(tmp_path: Path) -> None:

@@ -118,13 +118,19 @@ def make_fix(
 
 
 def make_filter(buffer: TransformBuffer, **sections: dict[str, object]) -> MapOdomFilter:
-    """``MapOdomFilter.from_config`` with the simulator's noise and section overrides."""
+    """``MapOdomFilter.from_config`` with the simulator's noise and section overrides.
+
+    Odometry calibration is off unless a test turns it on: this simulator's odometry drifts by
+    the filter's random-walk model alone (no systematic error to calibrate), and several tests
+    check the random-walk mechanics exactly. ``test_localize_calibration`` tests it.
+    """
     data: dict[str, object] = {
         "process_noise": {
             "sigma_per_sqrt_m": SIGMA_M.tolist(),
             "sigma_per_sqrt_rad": SIGMA_RAD.tolist(),
             "sigma_per_sqrt_s": SIGMA_S.tolist(),
         },
+        "calibration": {"enabled": False},
         **sections,
     }
     return MapOdomFilter.from_config(LocalizerConfig.model_validate(data), buffer)

@@ -257,8 +257,11 @@ def test_process_noise_one_increment_equals_the_path_integral(planar: bool) -> N
     )
     R = np.stack([A0.rotation.matrix, A1.rotation.matrix])
     t = np.stack([A0.translation, A1.translation])
-    Q_path, d_path = noise.covariance(np.array([0, S // 20]), R, t, planar)
-    Q_one, d_one = noise.increment(S // 20, R[0], t[0], R[1], t[1], planar)
+    path = noise.path(np.array([0, S // 20]), R, t, planar)
+    Q_path, d_path = path.Q, path.distance_m
+    one = noise.increment(S // 20, R[0], t[0], R[1], t[1], planar)
+    Q_one, d_one = one.Q, one.distance_m
+    np.testing.assert_allclose(one.M, path.M, rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(Q_one, Q_path, rtol=1e-12, atol=1e-15)
     assert d_one == pytest.approx(d_path) == pytest.approx(np.linalg.norm(t[1] - t[0]))
     Ad = (A1.to_se2() if planar else A1).adjoint()

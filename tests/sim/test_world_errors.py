@@ -86,7 +86,7 @@ CASES: list[tuple[str, Callable[[Doc], None], str]] = [
     (
         "cab tag without elevator",
         lambda d: _delete(d, ["elevator"]),
-        "tags[28].frame: tag is in frame elevator_cab but the world has no elevator",
+        "tags[35].frame: tag is in frame elevator_cab but the world has no elevator",
     ),
     (
         "unknown checkpoint",

@@ -52,6 +52,27 @@ class ProcessNoiseConfig(StrictModel):
     motion_step_s: float = Field(0.1, gt=0)
 
 
+class CalibrationConfig(StrictModel):
+    """Online odometry calibration: the systematic part of the drift, estimated with the state.
+
+    The filter estimates four corrections of the odometry's increments (see
+    :mod:`tagloc.localize.motion`): ``scale`` (fraction of distance), ``lateral`` (sideways m per
+    m), ``yaw_per_m`` (yaw bias, deg per m) and ``yaw_scale`` (fraction of the angle turned), each
+    the value to *add* (an odometry over-reading distance by 4 % calibrates to ``scale = -0.04``).
+    Between fixes the correction then drifts as the calibrated odometry says, instead of standing
+    still while the odometry drifts away. Order of every vector: scale, lateral, yaw_per_m (deg),
+    yaw_scale.
+    """
+
+    enabled: bool = True
+    #: 1-sigma of each parameter before any fix (mean 0).
+    prior_sigma: tuple[_Sigma, _Sigma, _Sigma, _Sigma] = (0.05, 0.02, 0.2, 0.03)
+    #: Random walk of each parameter per sqrt(m) travelled (they change with floor and gait).
+    sigma_per_sqrt_m: tuple[_Sigma, _Sigma, _Sigma, _Sigma] = (0.001, 0.0005, 0.005, 0.0005)
+    #: Estimates are clamped to +- these (a plausible odometry).
+    max_abs: tuple[_Sigma, _Sigma, _Sigma, _Sigma] = (0.2, 0.1, 2.0, 0.2)
+
+
 class GatesConfig(StrictModel):
     """Per-fix gates and the k-consistency rule."""
 
@@ -112,6 +133,12 @@ class SuspectConfig(StrictModel):
     min_gated: int = Field(3, ge=1)
     #: Consecutive fixes of a suspect source that pass the gate (not applied) to clear it.
     clear_after: int = Field(10, ge=1)
+    #: Consecutive gated fixes count as "wrong the same way" only if the corrections they imply
+    #: agree within this (m, and deg below): a moved tag repeats its pose to centimetres, while
+    #: glints decoded under its id are vague (metres of covariance) and pass a chi-square pair
+    #: test for that reason alone.
+    max_spread_m: float = Field(0.3, gt=0)
+    max_spread_deg: float = Field(5.0, gt=0)
 
 
 class FilterConfig(StrictModel):
@@ -138,6 +165,7 @@ class LocalizerConfig(StrictModel):
     version: Literal[1] = 1
     frames: FramesConfig = FramesConfig()
     process_noise: ProcessNoiseConfig = ProcessNoiseConfig()
+    calibration: CalibrationConfig = CalibrationConfig()
     gates: GatesConfig = GatesConfig()
     cap: CapConfig = CapConfig()
     kidnap: KidnapConfig = KidnapConfig()

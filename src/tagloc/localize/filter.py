@@ -42,7 +42,6 @@ from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 
 from tagloc.errors import TransformLookupError
 from tagloc.frames import TransformBuffer
@@ -75,16 +74,17 @@ from tagloc.localize.gating import (
     chi2_threshold,
     pair_d2,
 )
+from tagloc.localize.motion import (
+    N_CALIBRATION,
+    CalibrationModel,
+    PathMotion,
+    ProcessNoise,
+)
 
 logger = logging.getLogger(__name__)
 S_NS = 1_000_000_000
 PLANAR_AXES = [0, 1, 5]  # x, y, rz of [x, y, z, rx, ry, rz]
 _SERIES_BELOW = 0.3  # sum |tau_i| under which Jr, Jr^-1 use their series (error < 1e-6)
-
-
-def _hat(v: FloatArray) -> FloatArray:
-    x, y, z = v.tolist()
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 
 
 def _ad(tau: FloatArray) -> FloatArray:
@@ -118,95 +118,23 @@ def _jr_inv(tau: FloatArray) -> FloatArray:
     return se2_right_jacobian_inv(tau) if len(tau) == 3 else se3_right_jacobian_inv(tau)
 
 
-def _adjoints(R: FloatArray, t: FloatArray, planar: bool) -> FloatArray:
-    """``Ad(A_k)`` of odometry poses ``R (N, 3, 3)``, ``t (N, 3)``: SE(3) ``(N, 6, 6)`` or, planar,
-    SE(2) of their projections ``(N, 3, 3)``."""
-    n = len(R)
-    if planar:
-        yaw = np.arctan2(R[:, 1, 0], R[:, 0, 0])
-        c, s = np.cos(yaw), np.sin(yaw)
-        out = np.zeros((n, 3, 3))
-        out[:, 0, 0], out[:, 0, 1], out[:, 0, 2] = c, -s, t[:, 1]
-        out[:, 1, 0], out[:, 1, 1], out[:, 1, 2] = s, c, -t[:, 0]
-        out[:, 2, 2] = 1.0
-        return out
-    out = np.zeros((n, 6, 6))
-    out[:, :3, :3] = out[:, 3:, 3:] = R
-    tx = np.zeros((n, 3, 3))
-    tx[:, 0, 1], tx[:, 0, 2], tx[:, 1, 2] = -t[:, 2], t[:, 1], -t[:, 0]
-    out[:, :3, 3:] = (tx - np.swapaxes(tx, 1, 2)) @ R
-    return out
+__all__ = ["MapOdomFilter", "ProcessNoise"]
 
 
 @dataclass(frozen=True, slots=True)
 class _Innovation:
-    """A fix linearized at the state: ``nu (d,)``, ``H``, ``S^-1``, ``R`` (d, d), the prior
-    covariance ``P_fix`` the gain uses (the state's at the fix's stamp), and ``d2``."""
+    """A fix linearized at the state: ``nu (d,)``, ``H`` (d, n) over the whole state (pose and
+    calibration), ``S^-1``, ``R`` (d, d), the prior covariance ``P_fix`` (n, n) the gain uses (the
+    state's at the fix's stamp), ``M`` (d, 4): the calibration drift from the state's stamp to the
+    fix's (zeros without calibration), and ``d2``."""
 
     nu: FloatArray
     H: FloatArray
     S_inv: FloatArray
     R: FloatArray
     P_fix: FloatArray
+    M: FloatArray
     d2: float
-
-
-@dataclass(frozen=True, slots=True)
-class ProcessNoise:
-    """Random walk of ``T_map_odom`` driven by the odometry's motion.
-
-    Attributes
-    ----------
-    var_per_m, var_per_rad, var_per_s : (d,) float
-        Variance per metre travelled, per radian rotated, per second, of the base-frame axes
-        (``[x, y, z, rx, ry, rz]``, or ``[x, y, theta]`` planar).
-    step_ns : int
-        Sampling step of the odometry path (long intervals are integrated piecewise).
-    """
-
-    var_per_m: FloatArray
-    var_per_rad: FloatArray
-    var_per_s: FloatArray
-    step_ns: int
-
-    def covariance(
-        self, stamps_ns: npt.NDArray[np.int64], R: FloatArray, t: FloatArray, planar: bool
-    ) -> tuple[FloatArray, float]:
-        """``sum_k Ad(A_k) Q_k Ad(A_k)^T`` over the increments between odometry samples
-        ``A_k = (R[k], t[k])`` at ``stamps_ns (N,)`` (``R (N, 3, 3)``, ``t (N, 3)``), and the
-        distance travelled (m)."""
-        dR = np.swapaxes(R[:-1], 1, 2) @ R[1:]
-        dist = np.linalg.norm(np.diff(t, axis=0), axis=1)
-        cos = np.clip(0.5 * (np.trace(dR, axis1=1, axis2=2) - 1.0), -1.0, 1.0)
-        dt = np.abs(np.diff(stamps_ns)) / S_NS
-        var = (
-            np.outer(dist, self.var_per_m)
-            + np.outer(np.arccos(cos), self.var_per_rad)
-            + np.outer(dt, self.var_per_s)
-        )
-        Ad = _adjoints(R[1:], t[1:], planar)
-        Q = np.einsum("kij,kj,klj->il", Ad, var, Ad)
-        return Q, float(dist.sum())
-
-    def increment(
-        self, dt_ns: int, R0: FloatArray, t0: FloatArray, R1: FloatArray, t1: FloatArray,
-        planar: bool,
-    ) -> tuple[FloatArray, float]:  # fmt: skip
-        """:meth:`covariance` for one increment ``(R0, t0) -> (R1, t1)`` (the per-fix path)."""
-        d = t1 - t0
-        dist = math.sqrt(float(d @ d))
-        cos = 0.5 * (float(np.vdot(R0, R1)) - 1.0)  # trace(R0^T R1) = sum(R0 * R1)
-        angle = math.acos(min(1.0, max(-1.0, cos)))
-        var = dist * self.var_per_m + angle * self.var_per_rad + (dt_ns / S_NS) * self.var_per_s
-        if planar:
-            c, s = R1[0, 0], R1[1, 0]
-            n = math.hypot(c, s)
-            Ad = np.array([[c / n, -s / n, t1[1]], [s / n, c / n, -t1[0]], [0.0, 0.0, 1.0]])
-        else:
-            Ad = np.zeros((6, 6))
-            Ad[:3, :3] = Ad[3:, 3:] = R1
-            Ad[:3, 3:] = _hat(t1) @ R1
-        return (Ad * var) @ Ad.T, dist
 
 
 class MapOdomFilter:
@@ -238,10 +166,16 @@ class MapOdomFilter:
         Or from this many such fixes of one source (0: never from one source).
     suspect_min_gated, suspect_clear_after : int
         See :class:`~tagloc.localize.gating.SourceMonitor`.
+    suspect_spread : CorrectionCap
+        Consecutive gated fixes of a source are "wrong the same way" only if the corrections
+        they imply differ by less than this (a cap used as a bound).
     max_iterations : int
     relinearize_tol : float
     history_size, max_events : int
         Published corrections and events kept.
+    calibration : CalibrationModel, optional
+        Estimate the odometry's calibration with the state (:mod:`tagloc.localize.motion`);
+        None: the correction is a pure random walk.
     """
 
     def __init__(
@@ -250,13 +184,18 @@ class MapOdomFilter:
         k_consistent: int, consistency_window_ns: int, gap_ns: int, gap_m: float,
         cap: CorrectionCap, kidnap_n: int, kidnap_min_sources: int, kidnap_window_ns: int,
         kidnap_n_one_source: int = 0,
-        suspect_min_gated: int, suspect_clear_after: int, max_iterations: int,
+        suspect_min_gated: int, suspect_clear_after: int, suspect_spread: CorrectionCap,
+        max_iterations: int,
         relinearize_tol: float, history_size: int, max_events: int,
+        calibration: CalibrationModel | None = None,
     ) -> None:  # fmt: skip
         self._buffer = buffer
         self.map_frame, self.odom_frame, self.base_frame = map_frame, odom_frame, base_frame
         self.planar = planar
         self.dof = 3 if planar else 6
+        self._calib = calibration
+        self._nc = N_CALIBRATION if calibration is not None else 0
+        self._n = self.dof + self._nc  # error-state size: pose tangent, then calibration
         self._noise, self._quality, self._cap = noise, quality, cap
         self.threshold = chi2_threshold(chi2_quantile, self.dof)
         self._gap_ns, self._gap_m = gap_ns, gap_m
@@ -278,16 +217,24 @@ class MapOdomFilter:
         )
         self._sources = SourceMonitor(suspect_min_gated, suspect_clear_after)
         self._last_gated: dict[str, Candidate] = {}  # per source, for the suspect test
+        self._suspect_window_ns = kidnap_window_ns
+        self._suspect_spread = suspect_spread
         self._batch: tuple[tuple[TagFix, EventKind], ...] = ()
         self.batch_serial = 0
         self.events = EventLog(max_events)
         self._history: deque[CorrectionUpdate] = deque(maxlen=history_size)
         self._X: Pose | None = None
-        self._P = np.zeros((self.dof, self.dof))
+        self._c = np.zeros(self._nc)  # odometry calibration (module motion)
+        self._P = np.zeros((self._n, self._n))  # [pose tangent, calibration]
+        if calibration is not None:
+            self._P[self.dof :, self.dof :] = np.diag(calibration.prior_var)
         self._stamp = self._updated_ns = 0  # predicted to; last fix applied at
         self._A = SE3.identity()  # T_odom_base at the state's stamp
         self._odometer_m = 0.0
         self._published: Pose | None = None
+        self._cap_ref: Pose | None = None  # published correction the current stamp caps from
+        self._cap_stamp = -1
+        self._step_ref: Pose | None = None  # published at the last predict() (odometry step)
         self._gap = False
         self._ref_stamp, self._ref_odometer = 0, 0.0
 
@@ -300,6 +247,18 @@ class MapOdomFilter:
 
         def var(sigmas: tuple[float, ...]) -> FloatArray:
             return np.square(np.asarray(sigmas, dtype=np.float64))[axes]
+
+        cal = config.calibration
+        deg = np.array([1.0, 1.0, math.pi / 180.0, 1.0])  # yaw_per_m is in degrees
+        calibration = (
+            CalibrationModel(
+                np.square(np.asarray(cal.prior_sigma) * deg),
+                np.square(np.asarray(cal.sigma_per_sqrt_m) * deg),
+                np.asarray(cal.max_abs) * deg,
+            )
+            if cal.enabled
+            else None
+        )
 
         return cls(
             buffer, map_frame=f.map_frame, odom_frame=f.odom_frame, base_frame=f.base_frame,
@@ -321,9 +280,13 @@ class MapOdomFilter:
             kidnap_n_one_source=k.n_fixes_one_source if k.enabled else 0,
             suspect_min_gated=config.suspect.min_gated,
             suspect_clear_after=config.suspect.clear_after,
+            suspect_spread=CorrectionCap(
+                config.suspect.max_spread_m, math.radians(config.suspect.max_spread_deg), True
+            ),
             max_iterations=config.filter.max_iterations,
             relinearize_tol=config.filter.relinearize_tol,
             history_size=config.filter.history_size, max_events=config.filter.max_events,
+            calibration=calibration,
         )  # fmt: skip
 
     # ----- outputs ---------------------------------------------------------------------------
@@ -347,7 +310,16 @@ class MapOdomFilter:
         """``(6, 6)`` right-tangent covariance of :attr:`T_map_odom`, ``[x, y, z, rx, ry, rz]``
         (planar: zero rows and columns for z, rx, ry)."""
         self._require()
-        return self._embed(self._P)
+        return self._embed(self._P[: self.dof, : self.dof])
+
+    @property
+    def odometry_calibration(self) -> tuple[FloatArray, FloatArray] | None:
+        """The estimated odometry calibration ``[scale, lateral, yaw_per_m (rad/m), yaw_scale]``
+        and its 1-sigma (see :mod:`tagloc.localize.motion`), or None when not estimated."""
+        if self._calib is None:
+            return None
+        sigma = np.sqrt(np.diag(self._P)[self.dof :])
+        return self._c.copy(), sigma
 
     @property
     def corrections(self) -> tuple[CorrectionUpdate, ...]:
@@ -401,9 +373,11 @@ class MapOdomFilter:
         """
         X = self._require()
         A3 = self._lookup(stamp_ns)
-        P = self._P + self._noise_between(stamp_ns, self._stamp, A3, self._A)[0]
+        motion = self._path(self._stamp, stamp_ns, self._A, A3)
+        P = self._predicted(self._P, motion)[: self.dof, : self.dof]
         if published and self._published is not None:
             X = self._published
+        X = self._drifted(X, motion)
         J = A3.inverse().adjoint()
         cov = J @ self._embed(P) @ J.T
         return PoseWithCovariance(
@@ -432,20 +406,38 @@ class MapOdomFilter:
         return self._event(stamp_ns, EventKind.INITIALIZED, detail="explicit prior")
 
     def predict(self, stamp_ns: int) -> None:
-        """Advance the state to ``stamp_ns``.
+        """Advance the state to ``stamp_ns``; call it at every odometry sample.
 
-        Optional: :meth:`update` and :meth:`pose_at` integrate the odometry path themselves.
         The path is integrated in steps of ``motion_step``: a stamp less than one step after
-        the state's returns at once (so calling this at the odometry rate costs little), as
-        does any call before initialization.
+        the state's returns almost at once (so calling this at the odometry rate costs little),
+        as does any call before initialization. With odometry calibration, the published
+        correction drifts with the state. Every call also ends one odometry step of the cap:
+        what was published since the previous call (updates, drift) is clipped to within the
+        cap of the correction published then, so between two calls the published
+        ``map -> base`` moves by at most the cap ((re)initializations excepted). Without calls,
+        the cap applies per publication stamp (:meth:`_publish`).
 
         Raises
         ------
         TransformLookupError
             If the odometry at ``stamp_ns`` is not buffered.
         """
-        if self._X is not None and stamp_ns - self._stamp >= self._noise.step_ns:
+        if self._X is None:
+            return
+        changed = False
+        if stamp_ns - self._stamp >= self._noise.step_ns:
             self._advance(stamp_ns, self._lookup(stamp_ns))
+            changed = self._nc > 0 and self._published is not None  # the calibrated drift
+        if self._published is None:
+            return
+        if self._step_ref is not None:
+            clipped = self._clip(self._step_ref, self._published, stamp_ns)
+            if clipped is not None:
+                self._published, changed = clipped, True
+        if changed:
+            last = self._history[-1].stamp_ns
+            self._history.append(CorrectionUpdate(max(stamp_ns, last), self._lift(self._published)))
+        self._step_ref = self._published
 
     def update(self, fix: TagFix) -> FilterEvent:
         """Decide on one fix and apply it if it passes; return the decision event.
@@ -486,17 +478,21 @@ class MapOdomFilter:
     def _decide(self, cand: Candidate) -> FilterEvent:
         """Chi-square gate against the state, then the update (or the kidnap / suspect books)."""
         fix = cand.fix
-        Q_back = None
-        if fix.stamp_ns < self._stamp:  # late: the state moved on since the fix's stamp
-            Q_back = self._noise_between(fix.stamp_ns, self._stamp, cand.odom, self._A)[0]
-        innov = self._innovation(cand, Q_back)
+        innov = self._innovation(cand, self._back(cand))
         d2 = innov.d2
         if d2 > self.threshold:
             event = self._event(fix.stamp_ns, EventKind.GATED_CHI2, fix.source, d2)
             last = self._last_gated.get(fix.source)
             self._last_gated[fix.source] = cand
-            consistent = last is not None and (
-                pair_d2(last, cand, self._pair_noise(last, cand)) <= self.threshold
+            # the previous gated fix of the source counts only if recent (a moved tag repeats
+            # itself within seconds; comparing with one from minutes ago says nothing)
+            consistent = (
+                last is not None
+                and cand.stamp_ns - last.stamp_ns <= self._suspect_window_ns
+                and not self._suspect_spread.clip(  # the two seen at the robot's pose
+                    (last.T_map_odom @ cand.A).inverse() @ cand.z  # type: ignore[operator]
+                )[1]
+                and pair_d2(last, cand, self._pair_noise(last, cand)) <= self.threshold
             )
             if self._sources.on_gated(fix.source, d2, consistent):
                 stats = self._sources.stats[fix.source]
@@ -517,7 +513,7 @@ class MapOdomFilter:
                 if found is not None:
                     self._reinitialize(found, EventKind.REINITIALIZED_KIDNAP)
             return event
-        self._X, self._P = self._iekf(cand, innov)
+        self._X, self._c, self._P = self._iekf(cand, innov)
         self._updated_ns = max(self._updated_ns, fix.stamp_ns)
         self._sources.on_accepted(fix.source, d2)
         self._kidnap.clear()
@@ -583,10 +579,7 @@ class MapOdomFilter:
 
     def _gated_now(self, cand: Candidate) -> bool:
         """Whether ``cand`` fails the chi-square gate against the current state."""
-        Q_back = None
-        if cand.stamp_ns < self._stamp:
-            Q_back = self._noise_between(cand.stamp_ns, self._stamp, cand.odom, self._A)[0]
-        return self._innovation(cand, Q_back).d2 > self.threshold
+        return self._innovation(cand, self._back(cand)).d2 > self.threshold
 
     def _reinitialize(self, found: list[Candidate], kind: EventKind) -> None:
         """Restart the state from consistent fixes (oldest first): the first sets ``X`` and
@@ -596,7 +589,7 @@ class MapOdomFilter:
         for cand in found[1:]:
             if cand.stamp_ns > self._stamp:
                 self._advance(cand.stamp_ns, cand.odom)
-            self._X, self._P = self._iekf(cand, self._innovation(cand, None))
+            self._X, self._c, self._P = self._iekf(cand, self._innovation(cand, None))
         self._ref_stamp, self._ref_odometer = self._stamp, self._odometer_m
         for cand in found:
             self._sources.on_accepted(cand.fix.source, None)
@@ -617,7 +610,12 @@ class MapOdomFilter:
         self._publish(self._stamp, snap=snap)
 
     def _reset_state(self, stamp_ns: int, odom: SE3, X: Pose, P: FloatArray) -> None:
-        self._X, self._P, self._stamp, self._A = X, np.array(P), stamp_ns, odom
+        """A new pose state (``P``: its (dof, dof) covariance); the odometry calibration is kept
+        (it belongs to the odometry, not to the pose), its correlation with the pose dropped."""
+        full = np.zeros((self._n, self._n))
+        full[: self.dof, : self.dof] = P
+        full[self.dof :, self.dof :] = self._P[self.dof :, self.dof :]
+        self._X, self._P, self._stamp, self._A = X, full, stamp_ns, odom
         self._updated_ns = stamp_ns
         self._gap = False
         self._ref_stamp, self._ref_odometer = stamp_ns, self._odometer_m
@@ -660,99 +658,191 @@ class MapOdomFilter:
 
     def _noise_between(self, t0: int, t1: int, A0: SE3, A1: SE3) -> tuple[FloatArray, float]:
         """Random-walk covariance and distance over the odometry path between two stamps."""
-        (lo, A_lo), (hi, A_hi) = sorted(((t0, A0), (t1, A1)), key=lambda p: p[0])
+        motion = self._path(t0, t1, A0, A1)
+        return motion.Q, motion.distance_m
+
+    def _path(self, t_from: int, t_to: int, A_from: SE3, A_to: SE3) -> PathMotion:
+        """:class:`PathMotion` of the odometry path from ``t_from`` to ``t_to`` (either order:
+        the drift ``M`` is negated for a path back in time; ``Q`` is the walk between them)."""
+        (lo, A_lo), (hi, A_hi) = sorted(((t_from, A_from), (t_to, A_to)), key=lambda p: p[0])
         R_lo, t_lo = A_lo.rotation.matrix, A_lo.translation
         R_hi, t_hi = A_hi.rotation.matrix, A_hi.translation
         n = math.ceil((hi - lo) / self._noise.step_ns)
-        if n <= 1:
-            return self._noise.increment(hi - lo, R_lo, t_lo, R_hi, t_hi, self.planar)
-        inner = lo + np.round(np.arange(1, n) * ((hi - lo) / n)).astype(np.int64)
-        try:
-            mid = self._buffer.lookup_many(self.odom_frame, self.base_frame, inner)
-        except TransformLookupError as exc:
-            logger.warning("odometry path %d..%d ns not buffered (%s): chord used", lo, hi, exc)
-            return self._noise.increment(hi - lo, R_lo, t_lo, R_hi, t_hi, self.planar)
-        stamps = np.concatenate([[lo], inner, [hi]])
-        R = np.concatenate([R_lo[None], mid.rotation.matrix, R_hi[None]])
-        t = np.concatenate([t_lo[None], mid.translation, t_hi[None]])
-        return self._noise.covariance(stamps, R, t, self.planar)
+        motion = None
+        if n > 1:
+            inner = lo + np.round(np.arange(1, n) * ((hi - lo) / n)).astype(np.int64)
+            try:
+                mid = self._buffer.lookup_many(self.odom_frame, self.base_frame, inner)
+            except TransformLookupError as exc:
+                logger.warning("odometry path %d..%d ns not buffered (%s): chord used", lo, hi, exc)
+            else:
+                stamps = np.concatenate([[lo], inner, [hi]])
+                R = np.concatenate([R_lo[None], mid.rotation.matrix, R_hi[None]])
+                t = np.concatenate([t_lo[None], mid.translation, t_hi[None]])
+                motion = self._noise.path(stamps, R, t, self.planar)
+        if motion is None:
+            motion = self._noise.increment(hi - lo, R_lo, t_lo, R_hi, t_hi, self.planar)
+        if t_to < t_from:
+            motion = PathMotion(motion.Q, motion.distance_m, -motion.M)
+        return motion
+
+    def _back(self, cand: Candidate) -> PathMotion | None:
+        """The path from the state's stamp back to a late fix's (None if not late)."""
+        if cand.stamp_ns >= self._stamp:
+            return None
+        return self._path(self._stamp, cand.stamp_ns, self._A, cand.odom)
+
+    def _full_noise(self, motion: PathMotion) -> FloatArray:
+        """Process noise of the whole state over ``motion``: the pose walk and the
+        calibration's."""
+        if not self._nc:
+            return motion.Q
+        assert self._calib is not None
+        Q = np.zeros((self._n, self._n))
+        Q[: self.dof, : self.dof] = motion.Q
+        Q[self.dof :, self.dof :] = np.diag(self._calib.var_per_m * motion.distance_m)
+        return Q
+
+    def _predicted(self, P: FloatArray, motion: PathMotion) -> FloatArray:
+        """``F P F^T + Q`` with ``F = [[I, M], [0, I]]`` (the calibration drives the pose)."""
+        if self._nc:
+            F = np.eye(self._n)
+            F[: self.dof, self.dof :] = motion.M
+            P = F @ P @ F.T
+        out: FloatArray = P + self._full_noise(motion)
+        return out
+
+    def _drifted(self, X: Pose, motion: PathMotion) -> Pose:
+        """``X (+) M c``: the correction moved by the calibrated odometry over ``motion``."""
+        if not self._nc:
+            return X
+        return X.plus(motion.M @ self._c)
 
     def _advance(self, stamp_ns: int, odom: SE3) -> None:
-        """Predict: ``P <- P + Q`` over the odometry path from the state's stamp."""
-        Q, dist = self._noise_between(self._stamp, stamp_ns, self._A, odom)
-        self._P = self._P + Q
+        """Predict over the odometry path from the state's stamp: ``X <- X (+) M c``,
+        ``P <- F P F^T + Q``; the published correction drifts with ``X``."""
+        motion = self._path(self._stamp, stamp_ns, self._A, odom)
+        self._P = self._predicted(self._P, motion)
+        if self._nc:
+            self._X = self._drifted(self._require(), motion)
+            if self._published is not None:
+                self._published = self._drifted(self._published, motion)
         self._stamp, self._A = stamp_ns, odom
-        self._odometer_m += dist
+        self._odometer_m += motion.distance_m
 
-    def _innovation(self, cand: Candidate, Q_back: FloatArray | None) -> _Innovation:
-        """Linearize a fix at the state. For a fix older than the state (``Q_back``: the random
-        walk from its stamp to the state's): if the state was only predicted since, the gain
-        uses the covariance at the fix's stamp, ``P - Q_back`` (exact for a random walk: the
-        same as updating on time, then predicting); if a newer fix was applied meanwhile, the
-        walk is added to the fix's noise instead, ``R + H Q_back H^T`` (conservative)."""
+    def _innovation(self, cand: Candidate, back: PathMotion | None) -> _Innovation:
+        """Linearize a fix at the state. A fix older than the state (``back``: the path from the
+        state's stamp to the fix's) is compared with the state moved back to its stamp,
+        ``X (+) M c`` (``M`` of ``back``; so ``H = [H_x, H_x M]`` over pose and calibration). If
+        the state was only predicted since, the gain uses the covariance at the fix's stamp,
+        ``P - Q_back`` (exact for this linear model: the same as updating on time, then
+        predicting); if a newer fix was applied meanwhile, the walk is added to the fix's noise
+        instead, ``R + H Q_back H^T`` (conservative)."""
         X, P = self._require(), self._P
-        nu = cand.z.minus(X @ cand.A)  # type: ignore[operator, arg-type]
-        H = _jr_inv(-nu) @ cand.Ad_A_inv
+        M = back.M if back is not None else np.zeros((self.dof, self._nc))
+        nu, H = self._linearize(cand, X, self._c, M)
         P_fix, R = P, cand.R
-        if Q_back is not None and self._updated_ns <= cand.stamp_ns:
-            P_fix = P - Q_back
-            try:  # a differently sampled path could overshoot: then the conservative way
-                np.linalg.cholesky(P_fix)
-            except np.linalg.LinAlgError:
-                P_fix, R = P, R + H @ Q_back @ H.T
-        elif Q_back is not None:
-            R = R + H @ Q_back @ H.T
+        if back is not None:
+            Q_back = self._full_noise(back)
+            Hx = H[:, : self.dof]
+            if self._updated_ns <= cand.stamp_ns:
+                P_fix = P - Q_back
+                try:  # a differently sampled path could overshoot: then the conservative way
+                    np.linalg.cholesky(P_fix)
+                except np.linalg.LinAlgError:
+                    P_fix, R = P, R + Hx @ back.Q @ Hx.T
+            else:
+                R = R + Hx @ back.Q @ Hx.T
         S_inv = np.linalg.inv(H @ P_fix @ H.T + R).astype(np.float64, copy=False)
-        return _Innovation(nu, H, S_inv, R, P_fix, float(nu @ S_inv @ nu))
+        return _Innovation(nu, H, S_inv, R, P_fix, M, float(nu @ S_inv @ nu))
 
-    def _iekf(self, cand: Candidate, innov: _Innovation) -> tuple[Pose, FloatArray]:
-        """Iterated error-state update (module docstring); returns the new ``X`` and ``P``.
-        Relinearizes while the step seen at the base, ``|H dx|``, exceeds the tolerance."""
-        X0, P0, R = self._require(), innov.P_fix, innov.R
-        X, Pi, m, nu, H, S_inv = X0, P0, None, innov.nu, innov.H, innov.S_inv
+    def _linearize(
+        self, cand: Candidate, X: Pose, c: FloatArray, M: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
+        """Innovation ``nu = z (-) (X (+) M c) @ A`` and its Jacobian ``H`` (d, n):
+        ``nu(X (+) dx, c + dc) ~ nu - H [dx, dc]``."""
+        X_fix = X.plus(M @ c) if self._nc else X
+        nu = cand.z.minus(X_fix @ cand.A)  # type: ignore[operator, arg-type]
+        Hx = _jr_inv(-nu) @ cand.Ad_A_inv
+        H = np.hstack([Hx, Hx @ M]) if self._nc else Hx
+        return nu, H
+
+    def _iekf(
+        self, cand: Candidate, innov: _Innovation
+    ) -> tuple[Pose, FloatArray, FloatArray]:
+        """Iterated error-state update (module docstring) of the pose and the calibration;
+        returns the new ``X``, ``c`` and ``P``. Relinearizes while the step seen at the base,
+        ``|H dx|``, exceeds the tolerance."""
+        X0, c0, P0, R, M = self._require(), self._c, innov.P_fix, innov.R, innov.M
+        dof, n = self.dof, self._n
+        X, c, Pi, m = X0, c0, P0, None
+        nu, H, S_inv = innov.nu, innov.H, innov.S_inv
+        J = np.eye(n)
         for i in range(self._max_iter):
             if i:  # relinearize at X: prior mean and covariance moved into X's tangent
                 e = X.minus(X0)  # type: ignore[arg-type]
-                Je = _jr(e)
-                m, Pi = -Je @ e, Je @ P0 @ Je.T
-                nu = cand.z.minus(X @ cand.A)  # type: ignore[operator, arg-type]
-                H = _jr_inv(-nu) @ cand.Ad_A_inv
+                J[:dof, :dof] = _jr(e)
+                m = -np.concatenate([J[:dof, :dof] @ e, c - c0])
+                Pi = J @ P0 @ J.T
+                nu, H = self._linearize(cand, X, c, M)
                 S_inv = np.linalg.inv(H @ Pi @ H.T + R).astype(np.float64, copy=False)
             K = Pi @ H.T @ S_inv
             dx = K @ nu if m is None else m + K @ (nu - H @ m)
-            X_new = X.plus(dx)
+            X_new, c_new = X.plus(dx[:dof]), c + dx[dof:]
             if float(np.abs(H @ dx).max()) <= self._tol:
                 break
-            X = X_new
-        IKH = np.eye(self.dof) - K @ H
-        Jd = _jr(dx)
+            X, c = X_new, c_new
+        IKH = np.eye(n) - K @ H
+        Jd = np.eye(n)
+        Jd[:dof, :dof] = _jr(dx[:dof])
         P = Jd @ (IKH @ Pi @ IKH.T + K @ R @ K.T) @ Jd.T  # Joseph form, then the reset
         # Plus the walk since the fix's stamp when the gain used P - Q_back (the walk's
         # covariance, Ad(A) Q Ad(A)^T, does not depend on X: no reset for it).
         P = P + (self._P - P0)
-        return X_new, 0.5 * (P + P.T)
+        if self._calib is not None:
+            c_new = np.clip(c_new, -self._calib.max_abs, self._calib.max_abs)
+        return X_new, c_new, 0.5 * (P + P.T)
 
     def _publish(self, stamp_ns: int, *, snap: bool) -> None:
-        """Publish ``T_map_odom`` moved toward the estimate by at most the cap per update."""
+        """Publish ``T_map_odom`` moved toward the estimate by at most the cap per publication
+        stamp: the updates published at one stamp (the fixes of one frame, a batch applied after
+        a gap, late fixes published at the latest stamp) share one cap. (:meth:`predict` also
+        bounds what one odometry step publishes.) A snap, a declared (re)initialization,
+        publishes the estimate as it is."""
         X = self._require()
-        new = X
-        if self._published is not None and not snap:
-            A = self._A.to_se2() if self.planar else self._A
-            X_A = X @ A  # type: ignore[operator]
-            jump = (self._published @ A).inverse() @ X_A  # type: ignore[operator]
-            step, clipped = self._cap.clip(jump)
-            if clipped:  # new @ A = published @ A @ step; built from X (no round-off build-up)
-                rest = step.inverse() @ jump  # type: ignore[operator]
-                new = X_A @ rest.inverse() @ A.inverse()  # type: ignore[operator]
-                angle = float(np.linalg.norm(rest.log()[2 if self.planar else 3 :]))
-                self._event(
-                    stamp_ns, EventKind.CAPPED,
-                    detail=f"remainder {np.linalg.norm(rest.translation):.3f} m, "
-                    f"{math.degrees(angle):.2f} deg",
-                )  # fmt: skip
-        self._published = new
+        new: Pose = X
         last = self._history[-1].stamp_ns if self._history else stamp_ns
-        self._history.append(CorrectionUpdate(max(stamp_ns, last), self._lift(new)))
+        stamp = max(stamp_ns, last)
+        if self._published is not None and stamp != self._cap_stamp:
+            self._cap_ref, self._cap_stamp = self._published, stamp  # in force before `stamp`
+        if snap:  # later updates at this stamp, and the odometry step, cap from here
+            self._cap_ref, self._cap_stamp, self._step_ref = X, stamp, None
+        elif self._cap_ref is not None:
+            clipped = self._clip(self._cap_ref, X, stamp_ns)
+            new = X if clipped is None else clipped
+        self._published = new
+        self._history.append(CorrectionUpdate(stamp, self._lift(new)))
+
+    def _clip(self, ref: Pose, target: Pose, stamp_ns: int) -> Pose | None:
+        """``target`` moved back to within the cap of ``ref`` (both seen at the robot's pose
+        ``A``, the odometry at the state's stamp), or None if it is within already; logs a
+        ``CAPPED`` event with the remainder carried to later updates."""
+        A = self._A.to_se2() if self.planar else self._A
+        X_A = target @ A  # type: ignore[operator]
+        jump = (ref @ A).inverse() @ X_A  # type: ignore[operator]
+        step, clipped = self._cap.clip(jump)
+        if not clipped:
+            return None
+        # new @ A = ref @ A @ step, built from the target (no round-off build-up)
+        rest = step.inverse() @ jump  # type: ignore[operator]
+        angle = float(np.linalg.norm(rest.log()[2 if self.planar else 3 :]))
+        self._event(
+            stamp_ns, EventKind.CAPPED,
+            detail=f"remainder {np.linalg.norm(rest.translation):.3f} m, "
+            f"{math.degrees(angle):.2f} deg",
+        )  # fmt: skip
+        out: Pose = X_A @ rest.inverse() @ A.inverse()  # type: ignore[operator]
+        return out
 
     def _event(
         self, stamp_ns: int, kind: EventKind, source: str = "", d2: float | None = None,

@@ -374,7 +374,19 @@ class LocalizationPipeline:
 
     def _metadata(self) -> dict[str, Any]:
         counts = {str(k): v for k, v in self.filter.events.counts_by_kind().items()}
+        calibration = self.filter.odometry_calibration
+        if calibration is not None:
+            from tagloc.localize.motion import CALIBRATION_PARAMETERS
+
+            value, sigma = calibration
+            calib: dict[str, Any] | None = {
+                name: {"value": float(v), "sigma": float(s)}
+                for name, v, s in zip(CALIBRATION_PARAMETERS, value, sigma, strict=True)
+            }
+        else:
+            calib = None
         return {
+            "odometry_calibration": calib,
             "skipped": dict(self.skipped), "event_counts": counts,
             "suspect_sources": list(self.filter.suspect_sources),
             "pipeline_wall_s": self._wall_s, "config": self.config.model_dump(mode="json"),

@@ -332,7 +332,12 @@ def _glint(
         side = rng.uniform(20.0, 120.0)
         center = rng.uniform([side, side], [camera.width - side, camera.height - side])
         square = 0.5 * side * np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
-        corners = center + square + rng.normal(0.0, 0.15 * side, size=(4, 2))
+        corners = center + square
+        for _ in range(20):  # a detector only reports convex, clockwise quads: draw one
+            jittered = corners + rng.normal(0.0, 0.15 * side, size=(4, 2))
+            if _convex_clockwise(jittered):
+                corners = jittered
+                break
     return TagDetection(
         tag_id=tags.ids[j],
         family=tags.families[j],
@@ -340,3 +345,10 @@ def _glint(
         hamming=int(rng.integers(0, 3)),
         decision_margin=float(rng.uniform(20.0, 80.0)),
     )
+
+
+def _convex_clockwise(corners: FloatArray) -> bool:
+    """Whether a quad (4, 2) is strictly convex and wound clockwise on screen (v down)."""
+    edges = np.roll(corners, -1, axis=0) - corners
+    following = np.roll(edges, -1, axis=0)
+    return bool((edges[:, 0] * following[:, 1] - edges[:, 1] * following[:, 0] > 0.0).all())
