@@ -1,0 +1,151 @@
+"""Files of a tag-sensor sweep: ``tag_sweep.csv``, ``tag_sweep.md``, the config and the plots.
+
+:func:`format_csv` and :func:`format_markdown` are pure (text in, text out);
+:func:`write_tag_sweep` writes every file atomically (temporary file beside it, then rename).
+
+Markdown columns (one table per blur/noise condition): ``dist`` (m) and ``angle`` (deg) of the
+cell; ``det`` and ``acc``: detection and acceptance rate of its views; ``pos med`` / ``pos p95``
+(cm) and ``rot med`` / ``rot p95`` (deg): error of the accepted ``T_cam_tag``; ``flips``: accepted
+ambiguity flips; ``NEES/dof``: mean NEES of the accepted estimates over 6 (1 is honest, below 1
+conservative); ``corner px``: RMS corner error of the detections; ``detect`` / ``rest`` (ms):
+median time per frame of detection, and of PnP + covariance + gates; ``rejected``: why the other
+views were not accepted.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+from tagloc.eval.summary import Check
+from tagloc.eval.tag_sweep import TagSweepResult
+from tagloc.eval.tag_sweep_config import save_tag_sweep_config
+from tagloc.eval.tag_sweep_plots import plot_tag_sweep_errors, plot_tag_sweep_rates
+from tagloc.eval.tag_sweep_stats import TagSweepRow
+from tagloc.fileutil import atomic_write_text
+
+#: Files :func:`write_tag_sweep` writes, in order.
+SWEEP_FILES = (
+    "tag_sweep.csv",
+    "tag_sweep.md",
+    "tag_sweep_config.yaml",
+    "tag_sweep_errors.png",
+    "tag_sweep_rates.png",
+)
+
+CSV_COLUMNS = (
+    "distance_m", "angle_deg", "blur_px", "noise_dn", "n_views", "n_detected", "n_accepted",
+    "detection_rate", "acceptance_rate", "position_error_median_m", "position_error_p95_m",
+    "rotation_error_median_deg", "rotation_error_p95_deg", "flips", "nees_per_dof",
+    "corner_rms_px", "detect_ms", "rest_ms", "false_detections", "rejections",
+)  # fmt: skip
+
+
+def _num(value: float, digits: int, scale: float = 1.0) -> str:
+    return f"{value * scale:.{digits}f}" if math.isfinite(value) else "-"
+
+
+def format_rejections(rejections: Sequence[tuple[str, int]]) -> str:
+    """``"ambiguous:3 missed:1"`` (empty if none)."""
+    return " ".join(f"{reason}:{n}" for reason, n in rejections)
+
+
+def format_csv(rows: Sequence[TagSweepRow]) -> str:
+    """One line per cell, columns :data:`CSV_COLUMNS` (SI units as named; NaN empty)."""
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(CSV_COLUMNS)
+    for r in rows:
+        values = [getattr(r, c) for c in CSV_COLUMNS[:-1]]
+        cells = [
+            "" if isinstance(v, float) and math.isnan(v) else (f"{v:.6g}" if isinstance(v, float)
+                                                                 else str(v))
+            for v in values
+        ]  # fmt: skip
+        writer.writerow([*cells, format_rejections(r.rejections)])
+    return buffer.getvalue()
+
+
+def markdown_table(rows: Sequence[TagSweepRow]) -> list[str]:
+    """The rows of one condition as markdown table lines (columns in the module docstring)."""
+    lines = [
+        "| dist (m) | angle (deg) | det | acc | pos med (cm) | pos p95 (cm) | rot med (deg) "
+        "| rot p95 (deg) | flips | NEES/dof | corner px | detect (ms) | rest (ms) | rejected |",
+        "|" + "---:|" * 13 + "---|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r.distance_m:g} | {r.angle_deg:g} | {_num(r.detection_rate, 2)} "
+            f"| {_num(r.acceptance_rate, 2)} | {_num(r.position_error_median_m, 2, 100)} "
+            f"| {_num(r.position_error_p95_m, 2, 100)} | {_num(r.rotation_error_median_deg, 2)} "
+            f"| {_num(r.rotation_error_p95_deg, 2)} | {r.flips} | {_num(r.nees_per_dof, 2)} "
+            f"| {_num(r.corner_rms_px, 2)} | {_num(r.detect_ms, 1)} | {_num(r.rest_ms, 1)} "
+            f"| {format_rejections(r.rejections)} |"
+        )
+    return lines
+
+
+def check_lines(checks: Sequence[Check]) -> list[str]:
+    """The checks as a markdown table."""
+    lines = ["| check | value | target | result |", "|---|---:|---|---|"]
+    for c in checks:
+        value = f"{c.value:.4g}" if math.isfinite(c.value) else "n/a"
+        result = {True: "pass", False: "**FAIL**", None: "n/a"}[c.passed]
+        lines.append(f"| {c.name} | {value} | {c.target} | {result} |")
+    return lines
+
+
+def conditions(rows: Sequence[TagSweepRow]) -> list[tuple[float, float]]:
+    """The sweep's ``(blur_px, noise_dn)`` conditions in row order."""
+    return list(dict.fromkeys((r.blur_px, r.noise_dn) for r in rows))
+
+
+def format_markdown(result: TagSweepResult) -> str:
+    """The sweep as markdown: setup, one table per condition, summary and checks."""
+    c = result.config
+    noise = c.noise_model()
+    lines = [
+        f"Tag sweep: {c.tag_size_m:g} m {c.family}, {c.image_width}x{c.image_height} "
+        f"pinhole with {c.hfov_deg:g} deg horizontal field of view, backend `{c.backend}`"
+        + (f" ({c.detector_options})" if c.detector_options else "")
+        + f", prior `{c.prior}`, noise model sigma {noise.sigma_px:g} px; "
+        f"{c.trials} views a cell, seed {c.seed}.",
+        "",
+    ]
+    for blur, read in conditions(result.rows):
+        rows = [r for r in result.rows if (r.blur_px, r.noise_dn) == (blur, read)]
+        reference = " (reference condition)" if (blur, read) == c.reference_condition else ""
+        lines += [f"Blur {blur:g} px, read noise {read:g} DN{reference}:", ""]
+        lines += [*markdown_table(rows), ""]
+    lines += [
+        f"{result.n_views} views in {result.elapsed_s:.0f} s; accepted ambiguity flips: "
+        f"{result.flips}; mean NEES/dof of accepted estimates: {_num(result.nees_per_dof, 2)}; "
+        f"median time per frame: detection {result.detect_ms:.1f} ms, PnP + covariance + "
+        f"gates {result.rest_ms:.2f} ms.",
+        "",
+        *check_lines(result.checks),
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def write_tag_sweep(result: TagSweepResult, out_dir: str | os.PathLike[str]) -> list[Path]:
+    """Write :data:`SWEEP_FILES` into ``out_dir`` (created if missing), each atomically.
+
+    Returns
+    -------
+    list of Path
+        The files written.
+    """
+    out = Path(out_dir)
+    paths = [out / name for name in SWEEP_FILES]
+    atomic_write_text(paths[0], format_csv(result.rows))
+    atomic_write_text(paths[1], format_markdown(result))
+    save_tag_sweep_config(result.config, paths[2])
+    plot_tag_sweep_errors(result.rows, paths[3])
+    plot_tag_sweep_rates(result.rows, paths[4])
+    return paths

@@ -1,0 +1,259 @@
+"""Per-cell statistics of a tag-sensor sweep and the issue's checks (pure functions).
+
+:class:`ViewOutcome` is one scored view (:mod:`tagloc.eval.tag_sweep`); :func:`cell_row` turns a
+cell's views into a :class:`TagSweepRow`; :func:`sweep_checks` tests the rows against
+:class:`~tagloc.eval.tag_sweep_config.TagSweepTargets`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from tagloc.eval.summary import Check
+from tagloc.eval.tag_sweep_config import TagSweepConfig
+
+#: Degrees of freedom of a pose's NEES.
+POSE_DOF = 6
+
+
+@dataclass(frozen=True, slots=True)
+class ViewOutcome:
+    """One view of a sweep, scored against the renderer's truth.
+
+    Attributes
+    ----------
+    detected : bool
+        The true tag's id was detected.
+    accepted : bool
+        ``observe_tags`` accepted it.
+    corner_sq_px2 : float
+        Mean over the four corners of the squared distance detected - true (px^2); NaN if not
+        detected.
+    detect_s, rest_s : float
+        Wall time of detection, and of ``observe_tags``, seconds.
+    rejection : str or None
+        Why the true tag was not accepted: a ``RejectReason`` value, ``"missed"`` (not
+        detected), None if accepted.
+    false_detections : int
+        Detections of other ids.
+    position_error_m, rotation_error_deg, nees : float
+        Of the accepted ``T_cam_tag`` against the truth (NaN if not accepted).
+    flip : bool
+        The accepted estimate took the wrong IPPE branch.
+    """
+
+    detected: bool
+    accepted: bool
+    corner_sq_px2: float
+    detect_s: float
+    rest_s: float
+    rejection: str | None
+    false_detections: int = 0
+    position_error_m: float = math.nan
+    rotation_error_deg: float = math.nan
+    nees: float = math.nan
+    flip: bool = False
+
+    def scored(
+        self, position_error_m: float, rotation_error_deg: float, flip: bool, nees: float
+    ) -> ViewOutcome:
+        """The same view with the accepted estimate's errors."""
+        return dataclasses.replace(
+            self,
+            position_error_m=position_error_m,
+            rotation_error_deg=rotation_error_deg,
+            flip=flip,
+            nees=nees,
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class TagSweepRow:
+    """One cell of a sweep: rates, errors of the accepted estimates, timing.
+
+    Attributes
+    ----------
+    distance_m, angle_deg, blur_px, noise_dn : float
+        The cell.
+    n_views, n_detected, n_accepted : int
+    detection_rate, acceptance_rate : float
+        ``n_detected / n_views``, ``n_accepted / n_views``.
+    position_error_median_m, position_error_p95_m : float
+        Of ``T_cam_tag``'s translation, accepted views (NaN if none).
+    rotation_error_median_deg, rotation_error_p95_deg : float
+    flips : int
+        Accepted ambiguity flips.
+    nees_per_dof : float
+        Mean NEES of the accepted estimates over 6 (1 for an honest covariance).
+    corner_rms_px : float
+        RMS distance of detected corners from the truth, px (NaN if none detected).
+    detect_ms, rest_ms : float
+        Median per-frame time of detection, and of PnP + covariance + gates, ms.
+    false_detections : int
+        Detections of ids that were not in the image.
+    rejections : tuple of (str, int)
+        Why views were not accepted (``"missed"``: not detected), most frequent first.
+    """
+
+    distance_m: float
+    angle_deg: float
+    blur_px: float
+    noise_dn: float
+    n_views: int
+    n_detected: int
+    n_accepted: int
+    detection_rate: float
+    acceptance_rate: float
+    position_error_median_m: float
+    position_error_p95_m: float
+    rotation_error_median_deg: float
+    rotation_error_p95_deg: float
+    flips: int
+    nees_per_dof: float
+    corner_rms_px: float
+    detect_ms: float
+    rest_ms: float
+    false_detections: int
+    rejections: tuple[tuple[str, int], ...]
+
+
+def _stat(values: list[float], q: float) -> float:
+    return float(np.percentile(values, q)) if values else math.nan
+
+
+def cell_row(
+    distance_m: float,
+    angle_deg: float,
+    blur_px: float,
+    noise_dn: float,
+    views: Sequence[ViewOutcome],
+) -> TagSweepRow:
+    """Statistics of one cell's views (see :class:`TagSweepRow`)."""
+    n = len(views)
+    accepted = [v for v in views if v.accepted]
+    corner = [v.corner_sq_px2 for v in views if v.detected and math.isfinite(v.corner_sq_px2)]
+    position = [v.position_error_m for v in accepted]
+    rotation = [v.rotation_error_deg for v in accepted]
+    n_detected = sum(v.detected for v in views)
+    reasons = Counter(v.rejection for v in views if v.rejection is not None)
+    return TagSweepRow(
+        distance_m=distance_m,
+        angle_deg=angle_deg,
+        blur_px=blur_px,
+        noise_dn=noise_dn,
+        n_views=n,
+        n_detected=n_detected,
+        n_accepted=len(accepted),
+        detection_rate=n_detected / n if n else math.nan,
+        acceptance_rate=len(accepted) / n if n else math.nan,
+        position_error_median_m=_stat(position, 50),
+        position_error_p95_m=_stat(position, 95),
+        rotation_error_median_deg=_stat(rotation, 50),
+        rotation_error_p95_deg=_stat(rotation, 95),
+        flips=sum(v.flip for v in accepted),
+        nees_per_dof=float(np.mean([v.nees for v in accepted])) / POSE_DOF
+        if accepted
+        else math.nan,
+        corner_rms_px=math.sqrt(float(np.mean(corner))) if corner else math.nan,
+        detect_ms=1e3 * float(np.median([v.detect_s for v in views])) if n else math.nan,
+        rest_ms=1e3 * float(np.median([v.rest_s for v in views])) if n else math.nan,
+        false_detections=sum(v.false_detections for v in views),
+        rejections=tuple(sorted(reasons.items(), key=lambda kv: (-kv[1], kv[0]))),
+    )
+
+
+def pooled_nees_per_dof(rows: Sequence[TagSweepRow]) -> float:
+    """Mean NEES / 6 over every accepted estimate of ``rows`` (NaN if none)."""
+    n = sum(r.n_accepted for r in rows)
+    if n == 0:
+        return math.nan
+    return sum(r.n_accepted * r.nees_per_dof for r in rows if r.n_accepted) / n
+
+
+def _worst(values: list[float]) -> float:
+    """Largest finite value (NaN if none)."""
+    finite = [v for v in values if math.isfinite(v)]
+    return max(finite) if finite else math.nan
+
+
+def _at_most(name: str, value: float, limit: float, unit: str) -> Check:
+    ok = None if math.isnan(value) else value <= limit
+    return Check(name, value, f"<= {limit:g} {unit}".rstrip(), ok)
+
+
+def sweep_checks(config: TagSweepConfig, rows: Sequence[TagSweepRow]) -> list[Check]:
+    """The issue's targets on a sweep's rows (value NaN and ``passed`` None where the sweep has
+    no cell to judge, e.g. no 2 m distance).
+
+    - position error median at 2 m and at 4 m: the worst cell (every angle with an accepted
+      view) of the reference condition;
+    - rotation error median at 2 m for views ``rotation_min_angle_deg`` or more off face-on;
+    - accepted ambiguity flips, whole sweep;
+    - mean NEES / dof of every accepted estimate of the sweep, within the band;
+    - acceptance pooled over the reference condition's views within ``acceptance_max_distance_m``
+      at ``acceptance_angles_deg``.
+    """
+    t = config.targets
+    blur, noise = config.reference_condition
+    ref = [r for r in rows if r.blur_px == blur and r.noise_dn == noise]
+
+    def at(distance: float, min_angle: float = 0.0) -> list[TagSweepRow]:
+        return [r for r in ref if math.isclose(r.distance_m, distance) and r.angle_deg >= min_angle]
+
+    checks = [
+        _at_most(
+            "position error median at 2 m (worst angle)",
+            _worst([r.position_error_median_m for r in at(2.0)]),
+            t.position_median_2m_m,
+            "m",
+        ),
+        _at_most(
+            "position error median at 4 m (worst angle)",
+            _worst([r.position_error_median_m for r in at(4.0)]),
+            t.position_median_4m_m,
+            "m",
+        ),
+        _at_most(
+            f"rotation error median at 2 m, >= {t.rotation_min_angle_deg:g} deg (worst angle)",
+            _worst([r.rotation_error_median_deg for r in at(2.0, t.rotation_min_angle_deg)]),
+            t.rotation_median_2m_deg,
+            "deg",
+        ),
+        _at_most(
+            "accepted ambiguity flips (all cells)", sum(r.flips for r in rows), t.max_flips, ""
+        ),
+    ]
+    low, high = t.nees_per_dof_band
+    nees = pooled_nees_per_dof(rows)
+    checks.append(
+        Check(
+            "NEES / dof of accepted estimates (all cells)",
+            nees,
+            f"in [{low:g}, {high:g}]",
+            None if math.isnan(nees) else low <= nees <= high,
+        )
+    )
+    lo_deg, hi_deg = t.acceptance_angles_deg
+    band = [
+        r
+        for r in ref
+        if r.distance_m <= t.acceptance_max_distance_m and lo_deg <= r.angle_deg <= hi_deg
+    ]
+    n = sum(r.n_views for r in band)
+    acceptance = sum(r.n_accepted for r in band) / n if n else math.nan
+    checks.append(
+        Check(
+            f"acceptance within {t.acceptance_max_distance_m:g} m at "
+            f"{lo_deg:g}-{hi_deg:g} deg (pooled)",
+            acceptance,
+            f">= {t.acceptance_min:g}",
+            None if math.isnan(acceptance) else acceptance >= t.acceptance_min,
+        )
+    )
+    return checks
