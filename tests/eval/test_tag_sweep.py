@@ -2,7 +2,7 @@
 
 Oracles: the renderer's ground truth (``TagTruth``: range, viewing angle, corners) for the sampled
 views; hand-built estimates for the flip rule and hand-computed statistics for a cell; the issue's
-accuracy targets on a tiny seeded sweep through the real detector.
+accuracy targets on a tiny seeded sweep through the real detector; the CLI's files and exit codes.
 """
 
 from __future__ import annotations
@@ -11,6 +11,8 @@ import csv
 import dataclasses
 import io
 import math
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +31,7 @@ from tagloc.eval.tag_sweep_config import (
     load_tag_sweep_config,
     save_tag_sweep_config,
 )
-from tagloc.eval.tag_sweep_report import format_csv, format_markdown
+from tagloc.eval.tag_sweep_report import SWEEP_FILES, format_csv, format_markdown
 from tagloc.eval.tag_sweep_stats import TagSweepRow, ViewOutcome, cell_row, pooled_nees_per_dof
 from tagloc.sim import RenderConfig, render_tags_scene
 from tagloc.tags import TagDetection, estimate_tag_pose, tag_object_points
@@ -189,3 +191,44 @@ def test_config_validates_names_the_field_and_round_trips(tmp_path: Path) -> Non
     assert camera.fx == pytest.approx(640.0) and camera.fy == camera.fx
     save_tag_sweep_config(TINY, tmp_path / "sweep.yaml")
     assert load_tag_sweep_config(tmp_path / "sweep.yaml") == TINY
+
+
+# ----- the command -----------------------------------------------------------------------------
+
+
+def _tagloc(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-c", "from tagloc.cli import main; main()", *args],
+        capture_output=True,
+        text=True,
+        env={"MPLBACKEND": "Agg", "PATH": "", "COLUMNS": "200"},
+        check=False,
+        timeout=300,
+    )
+
+
+def test_cli_quick_writes_every_file(tmp_path: Path) -> None:
+    done = _tagloc("eval", "tags", "--quick", "--seed", "2", "--out", str(tmp_path))
+    assert done.returncode == 0, done.stderr
+    assert "checks" in done.stdout and "position error median at 2 m" in done.stdout
+    assert {p.name for p in tmp_path.iterdir()} == set(SWEEP_FILES)
+    assert load_tag_sweep_config(tmp_path / "tag_sweep_config.yaml").seed == 2
+    rows = list(csv.DictReader(io.StringIO((tmp_path / "tag_sweep.csv").read_text())))
+    assert len(rows) == 9 and {r["n_views"] for r in rows} == {"4"}
+    assert (tmp_path / "tag_sweep_errors.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_cli_bad_input_is_one_error_line(tmp_path: Path) -> None:
+    bad = tmp_path / "sweep.yaml"
+    bad.write_text("distances_m: [2.0, -1.0]\n")
+    for args, expected in [
+        (("--config", str(bad)), "sweep.yaml: distances_m: value -1 outside"),
+        (("--quick", "--backend", "nope"), "unknown detector backend 'nope'"),
+        (("--quick", "--trials", "0"), "trials: input should be greater than or equal to 1"),
+    ]:
+        done = _tagloc("eval", "tags", *args, "--out", str(tmp_path / "out"))
+        assert done.returncode == 1, done.stderr
+        lines = done.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("tagloc: error: "), done.stderr
+        assert expected in lines[0]
+    assert not (tmp_path / "out").exists()
