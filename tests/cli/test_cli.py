@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -11,6 +12,7 @@ import pytest
 import yaml
 
 from tagloc.sim import load_default_world, load_world
+from tagloc.tags.tagmap import load_tag_map
 
 
 def _tagloc(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
@@ -25,7 +27,7 @@ def _tagloc(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[
     )
 
 
-def test_demo_writes_plot_and_world_and_reports_drift_and_localization(tmp_path: Path) -> None:
+def test_demo_surveys_localizes_and_writes_the_reports(tmp_path: Path) -> None:
     out = tmp_path / "out"
     result = _tagloc("demo", "--out", str(out), "--duration", "60")
     assert result.returncode == 0, result.stderr
@@ -33,9 +35,28 @@ def test_demo_writes_plot_and_world_and_reports_drift_and_localization(tmp_path:
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 50_000
     # the world written beside the result is the one that was driven, and reloads identically
     assert load_world(out / "world.yaml") == load_default_world()
-    assert "end-point drift" in result.stdout and "ATE RMSE" in result.stdout
-    assert "fused ATE RMSE" in result.stdout and "largest correction jump" in result.stdout
-    assert sorted(p.name for p in out.iterdir()) == ["drive.png", "world.yaml"]
+    for words in ("end-point drift", "survey: map error", "fused ATE RMSE, built map",
+                  "fused ATE RMSE, true map", "largest correction jump"):  # fmt: skip
+        assert words in result.stdout, words
+    assert sorted(p.name for p in out.iterdir()) == [
+        "drive.png", "localize", "localize_true_map", "map", "world.yaml"
+    ]
+    built = load_tag_map(out / "map" / "tags.yaml")
+    assert len(built) == len(load_default_world().tags)
+    for run in ("localize", "localize_true_map"):
+        summary = json.loads((out / run / "summary.json").read_text())
+        assert summary["estimators"]["fused"]["ate_rmse_m"] < summary["estimators"]["odometry"][
+            "ate_rmse_m"
+        ]
+        assert {"report.html", "fused.tum", "truth.tum"} <= {p.name for p in (out / run).iterdir()}
+
+
+def test_demo_quick_skips_the_survey(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    result = _tagloc("demo", "--out", str(out), "--duration", "20", "--quick")
+    assert result.returncode == 0, result.stderr
+    assert "survey:" not in result.stdout
+    assert sorted(p.name for p in out.iterdir()) == ["drive.png", "localize_true_map", "world.yaml"]
 
 
 def _write_world_with(tmp_path: Path, edit: str) -> Path:

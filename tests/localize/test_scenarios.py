@@ -76,18 +76,22 @@ def test_default_drive_fused_beats_odometry(default_run: LocalizationRun) -> Non
     odom = np.linalg.norm(
         np.asarray(run.T_odom_base.translation) - run.T_map_base_truth.translation, axis=1
     )
-    # measured: fused 0.085 m, odometry-only 0.89 m (the first 90 s, ~60 m)
+    # measured: fused 0.042 m, odometry-only 0.89 m (the first 90 s, ~60 m; the odometry
+    # calibration is still converging: the full drive reaches 0.038 m, see the slow test)
     assert rmse(odom) > 0.8
-    assert rmse(fused) < 0.12
-    assert rmse(fused) < rmse(odom) / 8
+    assert rmse(fused) < 0.06
     # near tags the fused estimate is at the centimetre level
     near = np.array([f.nearest_visible_tag_m < 3.0 and f.n_fixes_accepted > 0 for f in run.frames])
     stamps = np.array([f.stamp_ns for f in run.frames])[near]
     at = np.searchsorted(run.stamps_ns, stamps)
-    assert np.median(fused[at]) < 0.03  # measured 0.012 m
+    assert np.median(fused[at]) < 0.02  # measured 0.011 m
+    calibration = run.metadata["odometry_calibration"]
+    assert isinstance(calibration, dict)
+    # the legged odometry over-reads distance by 4 %: the filter has found most of it
+    assert -0.07 < calibration["scale"]["value"] < -0.02
 
 
-def test_correction_never_jumps_more_than_the_cap_per_update(
+def test_correction_never_jumps_more_than_the_cap(
     default_pipeline: tuple[LocalizationRun, LocalizationPipeline],
 ) -> None:
     run, pipe = default_pipeline
@@ -102,10 +106,10 @@ def test_correction_never_jumps_more_than_the_cap_per_update(
         A = run.T_odom_base[int(np.searchsorted(run.stamps_ns, after.stamp_ns))]
         jump = (before.T_map_odom @ A).inverse() @ (after.T_map_odom @ A)
         worst = max(worst, float(np.linalg.norm(jump.translation)))
-    assert worst <= cap + 1e-6, worst  # measured: 0.25 m (one capped update after a gap)
-    # between two odometry stamps several updates may land (a batch after a gap): measured
-    # 0.35 m at most, the cap carrying the rest
-    assert correction_jumps(run).max() <= 3 * cap
+    assert worst <= cap + 1e-6, worst
+    # between two odometry stamps too: the fixes of a frame, a batch after a gap and the
+    # calibrated drift share one cap per odometry step
+    assert correction_jumps(run).max() <= cap + 1e-9
 
 
 def test_glints_never_give_an_accepted_fix() -> None:
@@ -170,15 +174,29 @@ def test_camera_dropout_and_corridor_recover() -> None:
     assert {1, 2, 3, 5, 6, 7, 8}.isdisjoint({t.id for t in corridor.tag_map})
 
 
+#: Full-drive fused ATE bound per scenario (measured, seed 0, 700 s / 377 m): default 0.038 m,
+#: glint 0.038, moved_tag 0.038, dropout 0.044 (30 s without camera), corridor 0.16 (20 m of
+#: corridor without tags and a foot slip there: the degradation the scenario exists to show).
+FULL_ATE_M = {"default": 0.05, "glint": 0.05, "moved_tag": 0.05, "dropout": 0.06, "corridor": 0.25}
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["default", "glint", "moved_tag", "corridor", "dropout"])
+@pytest.mark.parametrize("name", sorted(FULL_ATE_M))
 def test_full_length_scenarios(name: str) -> None:
+    from tagloc.eval import evaluate
+
     run = run_scenario(name, seed=0)
-    fused = position_errors(run)
-    assert run.T_map_base_truth is not None
-    odom = np.linalg.norm(
-        np.asarray(run.T_odom_base.translation) - run.T_map_base_truth.translation, axis=1
-    )
-    assert rmse(odom) > 1.0
-    assert rmse(fused) < 0.15  # default measured 0.09 m over 560 m
-    assert sum(a.accepted for a in run.fixes if a.false_detection) == 0
+    summary = evaluate(run).summary
+    fused, odom = summary.estimators["fused"], summary.estimators["odometry"]
+    assert odom.ate_rmse_m > 1.0  # the legged odometry drifts several %
+    assert fused.ate_rmse_m <= FULL_ATE_M[name]
+    assert fused.false_fixes_accepted == 0
+    assert fused.largest_jump_m <= summary.cap_translation_m + 1e-9
+    if name in ("default", "glint"):  # (a moved tag alone in view is rightly refused)
+        assert fused.reliability is not None and fused.reliability.fraction >= 0.99
+    if name == "glint":  # issue 4: >= 1,000 injected, none accepted, >= 98 % of true ones
+        assert int(run.metadata["glints_injected"]) >= 1000  # type: ignore[call-overload]
+        assert summary.fixes.true_in_range_acceptance >= 0.98
+        assert run.metadata["suspect_sources"] == []
+    if name == "moved_tag":
+        assert run.metadata["suspect_sources"] == ["tag:5"]

@@ -36,12 +36,17 @@ def demo(
     out: Annotated[Path, typer.Option(help="Output directory.")] = Path("out"),
     world: WorldOption = None,
     seed: Annotated[int | None, typer.Option(help="Override the odometry seed.")] = None,
-    duration: Annotated[float | None, typer.Option(help="Only the first N s.")] = None,
+    duration: Annotated[
+        float | None, typer.Option(help="Localize only the first N s of the drive.")
+    ] = None,
+    quick: Annotated[
+        bool, typer.Option("--quick", help="Skip the survey; localize against the true map.")
+    ] = False,
 ) -> None:
-    """Simulate the default building drive, localize it against the tag map, report."""
+    """Survey the built-in building, build its tag map, localize a drive against it, report."""
     from tagloc.cli.demo import run_demo
 
-    run_demo(out=out, world_path=world, seed=seed, duration_s=duration)
+    run_demo(out=out, world_path=world, seed=seed, duration_s=duration, quick=quick)
 
 
 @world_app.command("check")

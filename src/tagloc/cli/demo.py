@@ -1,53 +1,97 @@
-"""``tagloc demo``: simulate the built-in building drive, localize it against the tag map, report.
+"""``tagloc demo``: the main job on the built-in building, survey to evaluated localization.
 
-Steps of :func:`run_demo`: simulate the default scenario (legged odometry), plot the drive, write
-the world used, localize through the same message stream a bag gives
-(:func:`tagloc.sim.scenarios.localize_scenario`), print a summary table, then hand the
-:class:`~tagloc.localize.run.LocalizationRun` to :func:`write_demo_report` (the evaluation
-report's hook).
+Steps of :func:`run_demo`:
+
+1. **Survey**: simulate a survey drive (the route with its own odometry seed), build the tag map
+   from its drifting odometry and simulated detections (:mod:`tagloc.mapping`, one anchor tag),
+   write ``map/tags.yaml`` and its QA report, and score it against the world's true tag poses.
+2. **Localize**: simulate a second drive (the default scenario, legged odometry) and localize it
+   through the same message stream a bag gives, against the *built* map; for reference, also
+   against the true (surveyed-by-hand) map.
+3. **Evaluate**: the evaluation report of each run (``report.html``, ``summary.json``, TUM
+   files; :func:`tagloc.eval.write_report`), the floor-plan plot, the world used, and a summary
+   table on the terminal.
+
+``--quick`` skips the survey (localizes against the true map only), for a fast look.
 """
 
 from __future__ import annotations
 
 import math
+import time
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
 from rich.console import Console
 from rich.table import Table
 
 if TYPE_CHECKING:
+    from tagloc.eval import EvalSummary
+    from tagloc.eval.drive_report import DriveSummary
     from tagloc.localize.run import LocalizationRun
+    from tagloc.mapping import BuildReport, MapErrors
+    from tagloc.sim import World
+    from tagloc.tags.tagmap import TagMap
+
+#: Survey drives use every n-th camera frame (30 Hz frames overlap; 10 Hz keeps the build short).
+SURVEY_CAMERA_STRIDE = 3
 
 
-def write_demo_report(run: LocalizationRun, out: Path) -> list[Path]:
-    """Hook for the evaluation report (HTML, ``summary.json``) of the demo's run.
+@dataclass(frozen=True, slots=True)
+class SurveyResult:
+    """The demo's survey: the built map, its QA report, its errors against the world."""
 
-    Called by :func:`run_demo` after localization with the run and the output directory;
-    returns the files written. The evaluation layer fills this in; until then it writes nothing.
-    """
-    del run, out
-    return []
+    tag_map: TagMap
+    report: BuildReport
+    errors: MapErrors
+    distance_m: float
+    seconds: float
 
 
-def largest_correction_jump_m(run: LocalizationRun) -> float:
-    """Largest jump of the published ``T_map_base`` between consecutive odometry stamps at the
-    same odometry, m, (re)initializations excluded (they snap by design)."""
-    A = run.T_odom_base[1:]
-    jump = (run.T_map_odom[:-1] @ A).inverse() @ (run.T_map_odom[1:] @ A)
-    size = np.linalg.norm(np.asarray(jump.translation), axis=1)
-    snaps = [e.stamp_ns for e in run.events if e.kind in ("initialized", "reinitialized_kidnap")]
-    size[np.clip(np.searchsorted(run.stamps_ns, snaps) - 1, 0, len(size) - 1)] = 0.0
-    size[~run.initialized[:-1]] = 0.0
-    return float(size.max()) if len(size) else 0.0
+@dataclass(frozen=True, slots=True)
+class DemoResult:
+    """What :func:`run_demo` produced."""
+
+    drive: DriveSummary
+    survey: SurveyResult | None
+    run_built_map: LocalizationRun | None
+    run_true_map: LocalizationRun
+    summaries: dict[str, EvalSummary]
+    files: tuple[Path, ...]
+
+
+def survey_and_build(world: World, seed: int, out: Path) -> SurveyResult:
+    """Simulate a survey drive with odometry seed ``seed``, build its tag map, write
+    ``out/tags.yaml`` and ``out/map_report.md``, and score the map against ``world``."""
+    from tagloc.fileutil import atomic_write_text
+    from tagloc.mapping import build_map_from_drive, map_errors
+    from tagloc.sim import ObservationConfig, simulate_drive
+    from tagloc.tags.tagmap import save_tag_map
+
+    start = time.perf_counter()
+    drive = simulate_drive(world, seed=seed)
+    tag_map, report = build_map_from_drive(
+        drive, ObservationConfig(seed=seed), camera_stride=SURVEY_CAMERA_STRIDE
+    )
+    out.mkdir(parents=True, exist_ok=True)
+    save_tag_map(tag_map, out / "tags.yaml")
+    atomic_write_text(out / "map_report.md", report.to_markdown())
+    distance = float(drive.distance_m[-1] - drive.distance_m[0])
+    return SurveyResult(
+        tag_map, report, map_errors(tag_map, world), distance, time.perf_counter() - start
+    )
 
 
 def run_demo(
-    out: Path, world_path: Path | None, seed: int | None, duration_s: float | None = None
-) -> LocalizationRun:
-    """Simulate, plot, localize and summarize one drive; write ``out/drive.png``,
-    ``out/world.yaml`` and whatever :func:`write_demo_report` adds. Returns the run."""
+    out: Path,
+    world_path: Path | None,
+    seed: int | None,
+    duration_s: float | None = None,
+    quick: bool = False,
+) -> DemoResult:
+    """Survey, localize and evaluate (module docstring); every output lands in ``out``."""
+    from tagloc.eval import write_report
     from tagloc.eval.drive_report import summarize_drive
     from tagloc.eval.plots import plot_world_and_paths
     from tagloc.fileutil import atomic_write_text
@@ -55,70 +99,104 @@ def run_demo(
     from tagloc.sim.scenarios import build_scenario, localize_scenario
 
     console = Console()
-    # 1. the world and one drive through it (the default scenario: tags as surveyed)
     world = load_default_world() if world_path is None else load_world(world_path)
     seed = world.robot.odometry.seed if seed is None else seed
-    scenario = build_scenario("default", seed, duration_s, world=world)
-    drive = scenario.drive
-    summary = summarize_drive(drive)
-    # 2. outputs: the picture, and the exact world used (so the run can be reproduced)
     out.mkdir(parents=True, exist_ok=True)
-    plot_path = out / "drive.png"
-    title = (
-        f"{world.name}: {summary.length_m:.0f} m, {world.robot.odometry.model} odometry "
-        f"(seed {drive.seed}) drifts {summary.endpoint_drift_m:.2f} m"
-    )
+    atomic_write_text(out / "world.yaml", world.to_yaml_text())
+    files = [out / "world.yaml"]
+    # 1. survey drive -> tag map (its own odometry seed: another walk through the building)
+    survey = None
+    if not quick:
+        with console.status("surveying: simulated survey drive, factor-graph map build"):
+            survey = survey_and_build(world, seed + 1, out / "map")
+        files += [out / "map" / "tags.yaml", out / "map" / "map_report.md"]
+    # 2. the drive to localize, against the built map (and the true map for reference)
+    scenario = build_scenario("default", seed, duration_s, world=world)
+    with console.status("localizing against the true tag map"):
+        run_true = localize_scenario(scenario)
+    run_built = None
+    if survey is not None:
+        with console.status("localizing against the built tag map"):
+            run_built = localize_scenario(replace(scenario, tag_map=survey.tag_map))
+    # 3. evaluation reports, the picture, the table
+    summaries = {"true map": write_report(run_true, out / "localize_true_map")}
+    files += [out / "localize_true_map" / "report.html"]
+    if run_built is not None:
+        summaries["built map"] = write_report(run_built, out / "localize")
+        files += [out / "localize" / "report.html"]
+    drive = summarize_drive(scenario.drive)
+    main = run_built or run_true
+    ate = summaries["built map" if run_built else "true map"].estimators["fused"].ate_rmse_m
     plot_world_and_paths(
         world,
-        {"ground truth": drive.T_map_base, "odometry": drive.T_odom_base},
-        plot_path,
-        title=title,
-    )
-    atomic_write_text(out / "world.yaml", world.to_yaml_text())
-    # 3. localize against the surveyed tag map, through the message stream
-    run = localize_scenario(scenario)
-    # 4. the summary table
-    table = Table(title="tagloc demo: simulated drive, odometry vs fused (map -> odom filter)")
+        {"ground truth": scenario.drive.T_map_base, "odometry": scenario.drive.T_odom_base,
+         "fused": main.T_map_base},
+        out / "drive.png",
+        title=f"{world.name}: {drive.length_m:.0f} m, {world.robot.odometry.model} odometry "
+        f"(seed {scenario.drive.seed}) drifts {drive.endpoint_drift_m:.2f} m; fused ATE "
+        f"{ate:.3f} m",
+    )  # fmt: skip
+    files.append(out / "drive.png")
+    console.print(_table(drive, survey, summaries, main))
+    console.print("wrote " + ", ".join(str(f) for f in files))
+    return DemoResult(drive, survey, run_built, run_true, summaries, tuple(files))
+
+
+def _table(
+    drive: DriveSummary,
+    survey: SurveyResult | None,
+    summaries: dict[str, EvalSummary],
+    run: LocalizationRun,
+) -> Table:
+    table = Table(title="tagloc demo: survey -> tag map -> map->odom localization")
     table.add_column("quantity")
     table.add_column("value", justify="right")
-    for name, value in _rows(summary, run):
-        table.add_row(name, value)
-    console.print(table)
-    # 5. the evaluation report (hook)
-    extra = write_demo_report(run, out)
-    written = [str(plot_path), str(out / "world.yaml"), *map(str, extra)]
-    console.print(f"wrote {', '.join(written)}")
-    return run
-
-
-def _rows(summary: object, run: LocalizationRun) -> list[tuple[str, str]]:
-    from tagloc.eval.drive_report import DriveSummary
-
-    assert isinstance(summary, DriveSummary) and run.T_map_base_truth is not None
-    truth = np.asarray(run.T_map_base_truth.translation)
-    fused = np.linalg.norm(np.asarray(run.T_map_base.translation) - truth, axis=1)
-    offered = [a for a in run.fixes if not a.decision.startswith("rejected:")]
-    accepted = sum(a.accepted for a in offered)
-    gated = sum(a.decision.startswith("gated") for a in offered)
-    cap = run.metadata.get("cap_translation_m", math.nan)
-    return [
-        ("route length", f"{summary.length_m:.1f} m"),
-        ("duration", f"{summary.duration_s:.1f} s"),
-        ("odometry samples / camera frames", f"{summary.n_poses} / {summary.n_camera_frames}"),
-        ("tags in the world", f"{summary.n_tags}"),
+    rows = [
+        ("route length / duration", f"{drive.length_m:.1f} m / {drive.duration_s:.1f} s"),
+        ("odometry samples / camera frames", f"{drive.n_poses} / {drive.n_camera_frames}"),
         (
             "odometry end-point drift",
-            f"{summary.endpoint_drift_m:.3f} m ({summary.drift_percent:.2f} % of distance)",
+            f"{drive.endpoint_drift_m:.3f} m ({drive.drift_percent:.2f} % of distance), "
+            f"yaw {drive.endpoint_yaw_drift_deg:.1f} deg",
         ),
-        ("odometry end-point yaw drift", f"{summary.endpoint_yaw_drift_deg:.2f} deg"),
-        ("odometry-only ATE RMSE (unaligned)", f"{summary.odom_ate.rmse:.3f} m"),
-        ("odometry ATE RMSE (SE(3)-aligned)", f"{summary.odom_ate_aligned.rmse:.3f} m"),
-        ("fused ATE RMSE (unaligned)", f"{math.sqrt(float(np.mean(fused**2))):.3f} m"),
-        ("fused max position error", f"{float(fused.max()):.3f} m"),
-        (
-            "tag observations / offered / accepted / gated",
-            f"{len(run.fixes)} / {len(offered)} / {accepted} / {gated}",
-        ),
-        ("suspect sources", ", ".join(run.metadata.get("suspect_sources", [])) or "none"),  # type: ignore[arg-type]
-        ("largest correction jump", f"{largest_correction_jump_m(run):.3f} m (cap {cap} m/update)"),
+        ("odometry-only ATE RMSE (unaligned)", f"{drive.odom_ate.rmse:.3f} m"),
     ]
+    if survey is not None:
+        e, r = survey.errors, survey.report
+        rows += [
+            ("survey: distance / tags mapped",
+             f"{survey.distance_m:.0f} m / {len(survey.tag_map)}"),
+            (
+                "survey: map error vs truth (RMS)",
+                f"{e.position_rms_m * 100:.1f} cm, {e.rotation_rms_deg:.2f} deg "
+                f"({r.reproj_rms_px:.2f} px reprojection)",
+            ),
+            ("survey: build time", f"{survey.seconds:.1f} s"),
+        ]  # fmt: skip
+    for name, s in summaries.items():
+        fused = s.estimators["fused"]
+        reliability = fused.reliability.fraction if fused.reliability else math.nan
+        rows += [
+            (f"fused ATE RMSE, {name}", f"{fused.ate_rmse_m:.3f} m"),
+            (f"reliability, {name}", f"{reliability * 100:.2f} % of opportunities"),
+        ]
+    main = summaries["built map" if "built map" in summaries else "true map"]
+    fused = main.estimators["fused"]
+    cap = main.cap_translation_m
+    offered = [a for a in run.fixes if not a.decision.startswith("rejected:")]
+    rows += [
+        (
+            "tag observations / offered / accepted",
+            f"{len(run.fixes)} / {len(offered)} / {sum(a.accepted for a in offered)}",
+        ),
+        ("false fixes accepted", str(fused.false_fixes_accepted or 0)),
+        ("largest correction jump", f"{fused.largest_jump_m:.3f} m (cap {cap:g} m per step)"),
+        ("checks", "all pass" if all(s.passed for s in summaries.values()) else "FAILED"),
+    ]
+    calibration = run.metadata.get("odometry_calibration")
+    if isinstance(calibration, dict):
+        scale = calibration["scale"]["value"] * 100
+        rows.append(("odometry calibration (scale)", f"{scale:+.1f} % estimated"))
+    for name, value in rows:
+        table.add_row(name, value)
+    return table

@@ -424,19 +424,17 @@ class MapOdomFilter:
         """
         if self._X is None:
             return
-        changed = False
+        odom = None
         if stamp_ns - self._stamp >= self._noise.step_ns:
-            self._advance(stamp_ns, self._lookup(stamp_ns))
-            changed = self._nc > 0 and self._published is not None  # the calibrated drift
+            odom = self._lookup(stamp_ns)
+            self._advance(stamp_ns, odom)
         if self._published is None:
             return
-        if self._step_ref is not None:
-            clipped = self._clip(self._step_ref, self._published, stamp_ns)
+        if self._step_ref is not None and self._step_ref is not self._published:
+            odom = odom if odom is not None else self._lookup(stamp_ns)  # judged at the robot
+            clipped = self._clip(self._step_ref, self._published, stamp_ns, odom)
             if clipped is not None:
-                self._published, changed = clipped, True
-        if changed:
-            last = self._history[-1].stamp_ns
-            self._history.append(CorrectionUpdate(max(stamp_ns, last), self._lift(self._published)))
+                self._set_published(clipped, stamp_ns)
         self._step_ref = self._published
 
     def update(self, fix: TagFix) -> FilterEvent:
@@ -726,7 +724,7 @@ class MapOdomFilter:
         if self._nc:
             self._X = self._drifted(self._require(), motion)
             if self._published is not None:
-                self._published = self._drifted(self._published, motion)
+                self._set_published(self._drifted(self._published, motion), stamp_ns)
         self._stamp, self._A = stamp_ns, odom
         self._odometer_m += motion.distance_m
 
@@ -759,13 +757,17 @@ class MapOdomFilter:
     def _linearize(
         self, cand: Candidate, X: Pose, c: FloatArray, M: FloatArray
     ) -> tuple[FloatArray, FloatArray]:
-        """Innovation ``nu = z (-) (X (+) M c) @ A`` and its Jacobian ``H`` (d, n):
-        ``nu(X (+) dx, c + dc) ~ nu - H [dx, dc]``."""
-        X_fix = X.plus(M @ c) if self._nc else X
-        nu = cand.z.minus(X_fix @ cand.A)  # type: ignore[operator, arg-type]
-        Hx = _jr_inv(-nu) @ cand.Ad_A_inv
-        H = np.hstack([Hx, Hx @ M]) if self._nc else Hx
-        return nu, H
+        """Innovation ``nu = z (-) (X (+) u) @ A``, ``u = M c``, and its Jacobian ``H`` (d, n):
+        ``nu(X (+) dx, c + dc) ~ nu - H [dx, dc]``, with ``H = [H_f Ad(Exp(-u)), H_f Jr(u) M]``
+        and ``H_f = Jl^-1(nu) Ad(A^-1)`` (``Jl^-1(nu) = Jr^-1(-nu)``), the Jacobian at the
+        state moved to the fix's stamp."""
+        if not self._nc:  # no calibration: the state is compared as it is
+            nu = cand.z.minus(X @ cand.A)  # type: ignore[operator, arg-type]
+            return nu, _jr_inv(-nu) @ cand.Ad_A_inv
+        E, Jr_u = type(X).exp(M @ c, jacobians=True)
+        nu = cand.z.minus(X @ E @ cand.A)  # type: ignore[operator, arg-type]
+        H_f = _jr_inv(-nu) @ cand.Ad_A_inv
+        return nu, np.hstack([H_f @ E.inverse().adjoint(), H_f @ Jr_u @ M])
 
     def _iekf(
         self, cand: Candidate, innov: _Innovation
@@ -818,16 +820,22 @@ class MapOdomFilter:
         if snap:  # later updates at this stamp, and the odometry step, cap from here
             self._cap_ref, self._cap_stamp, self._step_ref = X, stamp, None
         elif self._cap_ref is not None:
-            clipped = self._clip(self._cap_ref, X, stamp_ns)
+            clipped = self._clip(self._cap_ref, X, stamp_ns, self._A)
             new = X if clipped is None else clipped
-        self._published = new
-        self._history.append(CorrectionUpdate(stamp, self._lift(new)))
+        self._set_published(new, stamp)
 
-    def _clip(self, ref: Pose, target: Pose, stamp_ns: int) -> Pose | None:
-        """``target`` moved back to within the cap of ``ref`` (both seen at the robot's pose
-        ``A``, the odometry at the state's stamp), or None if it is within already; logs a
-        ``CAPPED`` event with the remainder carried to later updates."""
-        A = self._A.to_se2() if self.planar else self._A
+    def _set_published(self, T_map_odom: Pose, stamp_ns: int) -> None:
+        """Publish: the correction in force from ``stamp_ns`` (or the latest stamp published, if
+        later: publications never go back in time) on."""
+        self._published = T_map_odom
+        last = self._history[-1].stamp_ns if self._history else stamp_ns
+        self._history.append(CorrectionUpdate(max(stamp_ns, last), self._lift(T_map_odom)))
+
+    def _clip(self, ref: Pose, target: Pose, stamp_ns: int, odom: SE3) -> Pose | None:
+        """``target`` moved back to within the cap of ``ref``, both seen at the robot's pose
+        ``odom`` (``T_odom_base``), or None if it is within already; logs a ``CAPPED`` event
+        with the remainder carried to later updates."""
+        A = odom.to_se2() if self.planar else odom
         X_A = target @ A  # type: ignore[operator]
         jump = (ref @ A).inverse() @ X_A  # type: ignore[operator]
         step, clipped = self._cap.clip(jump)
