@@ -11,6 +11,7 @@ from tagloc.cli import localize_cmd
 from tagloc.cli.eval_cmd import eval_app
 from tagloc.cli.eval_tags_cmd import eval_tags  # noqa: F401  (registers tagloc eval tags)
 from tagloc.cli.map_cmd import map_app
+from tagloc.cli.sim_cmd import sim_app
 
 app = typer.Typer(
     name="tagloc",
@@ -23,6 +24,7 @@ world_app = typer.Typer(help="Simulated worlds: check a world file.", no_args_is
 app.add_typer(world_app, name="world")
 app.add_typer(map_app, name="map")
 app.add_typer(eval_app, name="eval")
+app.add_typer(sim_app, name="sim")
 app.command("localize")(localize_cmd.localize)
 
 WorldOption = Annotated[
