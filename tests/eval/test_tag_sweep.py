@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import io
+import itertools
 import math
 import subprocess
 import sys
@@ -19,27 +20,28 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from tagloc.eval.tag_sweep import (
-    TagSweepResult,
-    is_ambiguity_flip,
-    rotation_error_deg,
-    run_tag_sweep,
-    sample_wall_view,
-)
+from tagloc.eval.tag_sweep import TagSweepResult, is_ambiguity_flip, run_tag_sweep
 from tagloc.eval.tag_sweep_config import (
     TagSweepConfig,
     load_tag_sweep_config,
     save_tag_sweep_config,
 )
-from tagloc.eval.tag_sweep_report import SWEEP_FILES, format_csv, format_markdown
+from tagloc.eval.tag_sweep_report import (
+    SWEEP_FILES,
+    format_csv,
+    format_joint_csv,
+    format_markdown,
+)
 from tagloc.eval.tag_sweep_stats import TagSweepRow, ViewOutcome, cell_row, pooled_nees_per_dof
+from tagloc.eval.tag_views import rotation_error_deg, sample_board_view, sample_wall_view
 from tagloc.sim import RenderConfig, render_tags_scene
 from tagloc.tags import TagDetection, estimate_tag_pose, tag_object_points
 
-#: 2 and 4 m (the issue's accuracy distances) at 15-60 deg, sharp, default sensor noise.
+#: 2 and 4 m (the issue's accuracy distances) at 15-60 deg, sharp, default sensor noise; joint
+#: PnP over 2 and 4 tags face-on at 2 m.
 TINY = TagSweepConfig(
     distances_m=(2.0, 4.0), angles_deg=(15.0, 30.0, 60.0), blur_px=(0.0,), noise_dn=(1.5,),
-    trials=8, seed=3,
+    joint_tag_counts=(2, 4), joint_distances_m=(2.0,), trials=8, seed=3,
 )  # fmt: skip
 
 
@@ -76,6 +78,24 @@ def test_views_have_the_cells_range_and_angle_in_the_renderers_truth(
         R_map_tag = T_map_tag.rotation.matrix
         np.testing.assert_allclose(R_map_tag[:, 1], [0.0, 0.0, 1.0], atol=1e-12)  # upright
         np.testing.assert_allclose(R_map_tag[2, 2], 0.0, atol=1e-12)  # on a wall
+
+
+@pytest.mark.parametrize("n_tags", [2, 4])
+def test_board_views_are_face_on_and_in_the_image(n_tags: int) -> None:
+    camera = TagSweepConfig().camera_model()
+    rng = np.random.default_rng(12)
+    for distance in (1.0, 3.0):
+        T_map_tags, T_map_cam = sample_board_view(distance, n_tags, 0.3, rng)
+        scene = [(i, 0.16, T_map_cam.inverse() @ T) for i, T in enumerate(T_map_tags)]
+        _, truths = render_tags_scene(camera, scene, RenderConfig.ideal())
+        assert len(truths) == n_tags
+        # the camera faces the wall: a tag's view angle is its offset's angle (+ yaw and tilt)
+        half_span = 0.15 * (n_tags - 1) + 0.1
+        farthest_deg = math.degrees(math.atan(math.hypot(half_span, 0.3) / distance))
+        for truth in truths:
+            assert truth.fraction_visible == pytest.approx(1.0, abs=0.02)
+            assert math.degrees(truth.view_angle_rad) < farthest_deg + 4.0
+            assert distance <= truth.range_m <= math.hypot(distance, half_span, 0.3) + 1e-9
 
 
 def test_flip_rule_counts_the_wrong_branch_only() -> None:
@@ -118,7 +138,7 @@ def test_cell_row_statistics_by_hand() -> None:
 
 
 def test_tiny_sweep_meets_the_issues_targets(tiny: TagSweepResult) -> None:
-    assert len(tiny.rows) == 6 and tiny.n_views == 48
+    assert len(tiny.rows) == 6 and tiny.n_views == 6 * 8 + 2 * 8
     for row in tiny.rows:
         # quad_decimate=2 loses some of the 25 px wide, 60 deg oblique tags at 4 m
         assert row.detection_rate >= (0.5 if row.distance_m * row.angle_deg > 200 else 1.0), row
@@ -145,6 +165,19 @@ def test_tiny_sweep_meets_the_issues_targets(tiny: TagSweepResult) -> None:
     assert tiny.detect_ms > 0 and tiny.rest_ms > 0
 
 
+def test_joint_pnp_on_rendered_images(tiny: TagSweepResult) -> None:
+    # The issue: joint PnP over >= 2 tags no worse than the best single tag, <= 1 deg face-on.
+    assert [(j.n_tags, j.distance_m) for j in tiny.joint_rows] == [(2, 2.0), (4, 2.0)]
+    for j in tiny.joint_rows:
+        assert j.n_views == 8 and j.joint_rate == 1.0  # face-on singles are ambiguous; joint is not
+        assert j.rotation_error_median_deg <= 1.0
+        assert j.rotation_error_median_deg <= j.best_single_rotation_median_deg
+        assert j.position_error_median_m < 0.02
+        assert 0.05 < j.nees_per_dof < 2.0
+    four, two = tiny.joint_rows[1], tiny.joint_rows[0]
+    assert four.rotation_error_median_deg < two.rotation_error_median_deg
+
+
 def test_tiny_sweep_checks(tiny: TagSweepResult) -> None:
     checks = {c.name.split(" (")[0]: c for c in tiny.checks}
     for name in (
@@ -153,6 +186,8 @@ def test_tiny_sweep_checks(tiny: TagSweepResult) -> None:
         "rotation error median at 2 m, >= 15 deg",
         "accepted ambiguity flips",
         "acceptance within 3 m at 15-60 deg",
+        "joint PnP rotation error median, face-on at 2 m",
+        "joint minus best single tag, rotation median",
     ):
         assert checks[name].passed is True, checks[name]
     worst_2m = max(_row(tiny, 2.0, a).position_error_median_m for a in (15.0, 30.0, 60.0))
@@ -160,7 +195,9 @@ def test_tiny_sweep_checks(tiny: TagSweepResult) -> None:
 
 
 def test_a_cells_numbers_do_not_depend_on_the_other_cells(tiny: TagSweepResult) -> None:
-    alone = run_tag_sweep(TINY.model_copy(update={"distances_m": (4.0,), "angles_deg": (30.0,)}))
+    one_cell = {"distances_m": (4.0,), "angles_deg": (30.0,), "joint_tag_counts": ()}
+    alone = run_tag_sweep(TINY.model_copy(update=one_cell))
+    assert alone.joint_rows == ()
     assert _without_timing(alone.rows[0]) == _without_timing(_row(tiny, 4.0, 30.0))
 
 
@@ -171,8 +208,12 @@ def test_csv_and_markdown_hold_every_cell(tiny: TagSweepResult) -> None:
         tiny.rows[0].position_error_median_m, rel=1e-5
     )
     markdown = format_markdown(tiny)
-    assert markdown.count("| 2 | ") == 3 and markdown.count("| 4 | ") == 3
+    for distance, angle in itertools.product((2, 4), (15, 30, 60)):
+        assert markdown.count(f"\n| {distance} | {angle} | ") == 1
+    assert markdown.count("\n| 2 | 2 | ") == 1 and markdown.count("\n| 4 | 2 | ") == 1  # joint
     assert "(reference condition)" in markdown and "| check | value | target | result |" in markdown
+    joint = list(csv.DictReader(io.StringIO(format_joint_csv(tiny.joint_rows))))
+    assert [int(r["n_tags"]) for r in joint] == [2, 4]
 
 
 # ----- config ----------------------------------------------------------------------------------

@@ -68,7 +68,7 @@ def _sweep_config(path: Path | None, quick: bool, **overrides: Any) -> TagSweepC
 
 
 def print_tag_sweep(result: TagSweepResult) -> None:
-    """One rich table per blur/noise condition, a summary line and the checks."""
+    """One rich table per blur/noise condition, the joint table, a summary line, the checks."""
     from rich.console import Console
     from rich.table import Table
 
@@ -95,6 +95,19 @@ def print_tag_sweep(result: TagSweepResult) -> None:
                 format_rejections(r.rejections),
             )  # fmt: skip
         console.print(table)
+    if result.joint_rows:
+        joint = Table(title="joint PnP, face-on (reference condition)")
+        for column in ("tags", "dist m", "joint acc", "rot med deg", "rot p95 deg",
+                       "pos med cm", "best single rot med deg", "NEES/dof"):  # fmt: skip
+            joint.add_column(column, justify="right")
+        for j in result.joint_rows:
+            joint.add_row(
+                str(j.n_tags), f"{j.distance_m:g}", num(j.joint_rate, 2),
+                num(j.rotation_error_median_deg, 2), num(j.rotation_error_p95_deg, 2),
+                num(j.position_error_median_m, 2, 100), num(j.best_single_rotation_median_deg, 2),
+                num(j.nees_per_dof, 2),
+            )  # fmt: skip
+        console.print(joint)
     console.print(
         f"{result.n_views} views in {result.elapsed_s:.0f} s, flips {result.flips}, "
         f"NEES/dof {num(result.nees_per_dof, 2)}, per frame: detection {result.detect_ms:.1f} ms,"

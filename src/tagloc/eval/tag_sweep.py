@@ -3,8 +3,8 @@
 :func:`run_tag_sweep` scores every cell ``(distance, angle, blur, noise)`` of a
 :class:`~tagloc.eval.tag_sweep_config.TagSweepConfig`; for each of the cell's views it
 
-1. draws the view (:func:`sample_wall_view`: a tag on a wall, a nearly level camera), the tag id
-   and the orientation prior;
+1. draws the view (:func:`~tagloc.eval.tag_views.sample_wall_view`: a tag on a wall, a nearly
+   level camera), the tag id and the orientation prior;
 2. renders the camera image of the real tag bitmap (:func:`tagloc.sim.render_tags_scene`, with
    the cell's defocus blur and read noise, shot noise and vignetting as configured);
 3. detects tags in it with the configured backend (timed: ``detect``);
@@ -14,8 +14,10 @@
    and rotation error of ``T_cam_tag``, NEES, and whether it is an ambiguity flip
    (:func:`is_ambiguity_flip`).
 
-Per-cell statistics and the issue's checks are in :mod:`tagloc.eval.tag_sweep_stats`; files
-(CSV, markdown, plots) in :mod:`tagloc.eval.tag_sweep_report`.
+Then, for joint PnP, face-on rows of 2 or more tags (:mod:`tagloc.eval.tag_sweep_joint`).
+Views come from :mod:`tagloc.eval.tag_views`; per-cell statistics and the issue's checks are in
+:mod:`tagloc.eval.tag_sweep_stats`; files (CSV, markdown, plots) in
+:mod:`tagloc.eval.tag_sweep_report`.
 """
 
 from __future__ import annotations
@@ -27,27 +29,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tagloc.camera import CameraModel
 from tagloc.eval.summary import Check
 from tagloc.eval.tag_sweep_config import TagSweepConfig
+from tagloc.eval.tag_sweep_joint import JointRow, joint_cell, joint_checks
 from tagloc.eval.tag_sweep_stats import TagSweepRow, ViewOutcome, cell_row, sweep_checks
-from tagloc.geometry import SE3, SO3
+from tagloc.eval.tag_views import SweepStack, pose_prior, rotation_error_deg, sample_wall_view
+from tagloc.geometry import SE3
 from tagloc.sim.render import render_tags_scene
 from tagloc.sim.render_config import RenderConfig
-from tagloc.tags import (
-    NoiseModel,
-    PosePrior,
-    TagDetector,
-    family_spec,
-    make_detector,
-    nees,
-    observe_tags,
-)
+from tagloc.tags import nees, observe_tags
 from tagloc.tags.pnp import TagPoseEstimate
 
 __all__ = [
     "FLIP_MARGIN_DEG",
     "FLIP_MIN_ERROR_DEG",
+    "JointRow",
     "TagSweepResult",
     "is_ambiguity_flip",
     "rotation_error_deg",
@@ -59,10 +55,6 @@ __all__ = [
 FLIP_MIN_ERROR_DEG = 10.0
 #: ... and its other IPPE branch is closer to the truth by more than this.
 FLIP_MARGIN_DEG = 2.0
-#: Map up in a level camera's optical frame; optical axes of a level camera in a z-up map.
-_UP_LEVEL_CAM = np.array([0.0, -1.0, 0.0])
-_R_MAP_LEVEL = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
-_E_Z = np.array([0.0, 0.0, 1.0])
 
 #: ``progress(views_done, views_total)``, called after every cell.
 ProgressFn = Callable[[int, int], None]
@@ -78,8 +70,11 @@ class TagSweepResult:
         The sweep that was run.
     rows : tuple of TagSweepRow
         One per cell, ordered by blur, noise, distance, angle.
+    joint_rows : tuple of JointRow
+        The face-on multi-tag cells (:mod:`tagloc.eval.tag_sweep_joint`), by tag count, distance.
     checks : tuple of Check
-        The issue's targets (:func:`tagloc.eval.tag_sweep_stats.sweep_checks`).
+        The issue's targets (:func:`tagloc.eval.tag_sweep_stats.sweep_checks`, then
+        :func:`tagloc.eval.tag_sweep_joint.joint_checks`).
     nees_per_dof : float
         Mean NEES / 6 over every accepted estimate of the sweep (NaN if none).
     detect_ms, rest_ms : float
@@ -91,6 +86,7 @@ class TagSweepResult:
 
     config: TagSweepConfig
     rows: tuple[TagSweepRow, ...]
+    joint_rows: tuple[JointRow, ...]
     checks: tuple[Check, ...]
     nees_per_dof: float
     detect_ms: float
@@ -99,18 +95,13 @@ class TagSweepResult:
 
     @property
     def n_views(self) -> int:
-        """Views rendered."""
-        return sum(r.n_views for r in self.rows)
+        """Views rendered (single-tag and joint)."""
+        return sum(r.n_views for r in self.rows) + sum(r.n_views for r in self.joint_rows)
 
     @property
     def flips(self) -> int:
         """Accepted ambiguity flips over the whole sweep."""
         return sum(r.flips for r in self.rows)
-
-
-def rotation_error_deg(T_true: SE3, T_est: SE3) -> float:
-    """Angle of ``R_true^T R_est``, degrees."""
-    return float(np.rad2deg(np.linalg.norm((T_true.inverse() @ T_est).rotation.log())))
 
 
 def is_ambiguity_flip(T_cam_tag_true: SE3, estimate: TagPoseEstimate) -> bool:
@@ -128,76 +119,8 @@ def is_ambiguity_flip(T_cam_tag_true: SE3, estimate: TagPoseEstimate) -> bool:
     return rotation_error_deg(T_cam_tag_true, estimate.T_cam_tag_alt) < error - FLIP_MARGIN_DEG
 
 
-def sample_wall_view(
-    distance_m: float, angle_rad: float, rng: np.random.Generator, tilt_deg: float = 1.0
-) -> tuple[SE3, SE3]:
-    """An upright tag on a vertical wall seen by a nearly level camera at the map origin.
-
-    The tag center is ``distance_m`` away along a ray up to 25 deg off-axis horizontally and up
-    to ``min(15 deg, angle)`` vertically; the tag normal is horizontal and makes ``angle_rad``
-    with the ray to the camera (to either side); the camera is rolled and pitched by
-    ``N(0, tilt_deg)`` each. The same draws, in the same order, as the corner-level tests'
-    ``wall_view`` (``tests/tags/test_pnp.py``), so both see the same views for the same seed.
-
-    Parameters
-    ----------
-    distance_m : float
-    angle_rad : float
-        Viewing angle, ``[0, pi/2)``.
-    rng : numpy.random.Generator
-    tilt_deg : float
-
-    Returns
-    -------
-    T_cam_tag, T_map_cam : SE3
-        The map has z up; ``T_map_tag = T_map_cam @ T_cam_tag`` has its y axis up.
-    """
-    el = np.deg2rad(rng.uniform(-1.0, 1.0) * min(15.0, np.rad2deg(angle_rad)))
-    az = np.deg2rad(rng.uniform(-25.0, 25.0))
-    ray = np.array([np.sin(az) * np.cos(el), -np.sin(el), np.cos(az) * np.cos(el)])
-    psi = np.arccos(np.clip(np.cos(angle_rad) / np.cos(el), -1.0, 1.0)) * rng.choice([-1, 1])
-    h = -np.array([ray[0], 0.0, ray[2]]) / np.hypot(ray[0], ray[2])
-    c, s = np.cos(psi), np.sin(psi)
-    normal = np.array([c * h[0] + s * h[2], 0.0, -s * h[0] + c * h[2]])
-    R_level_tag = np.stack([np.cross(_UP_LEVEL_CAM, normal), _UP_LEVEL_CAM, normal], axis=1)
-    tilt = np.deg2rad(tilt_deg) * rng.normal(size=3) * np.array([1.0, 0.0, 1.0])
-    R_cam_level = SO3.from_rotvec(tilt).matrix
-    T_cam_tag = SE3(
-        rotation=SO3.from_matrix(R_cam_level @ R_level_tag),
-        translation=R_cam_level @ (distance_m * ray),
-    )
-    T_map_cam = SE3(rotation=SO3.from_matrix(_R_MAP_LEVEL @ R_cam_level.T), translation=np.zeros(3))
-    return T_cam_tag, T_map_cam
-
-
-def _pose_prior(config: TagSweepConfig, T_map_cam: SE3, rng: np.random.Generator) -> PosePrior:
-    """Gravity off by ``gravity_error_deg`` per axis, plus (``"rotation"``) a predicted camera
-    rotation off by ``prior_rotation_error_deg`` per axis; both with ``prior_sigma_deg``."""
-    measured = T_map_cam.rotation @ SO3.from_rotvec(
-        np.deg2rad(config.gravity_error_deg) * rng.normal(size=3)
-    )
-    up_cam = measured.inverse().act(_E_Z)
-    predicted = None
-    if config.prior == "rotation":
-        turn = np.deg2rad(config.prior_rotation_error_deg) * rng.normal(size=3)
-        predicted = T_map_cam.plus(np.r_[0.0, 0.0, 0.0, turn])
-    sigma = np.deg2rad(config.prior_sigma_deg)
-    return PosePrior(predicted, sigma, up_cam, sigma)
-
-
-@dataclass(frozen=True, slots=True)
-class _Stack:
-    """What every view of a sweep shares."""
-
-    config: TagSweepConfig
-    camera: CameraModel
-    detector: TagDetector
-    noise: NoiseModel
-    num_ids: int
-
-
 def _evaluate_view(
-    stack: _Stack, render: RenderConfig, distance_m: float, angle_deg: float, seed: list[int]
+    stack: SweepStack, render: RenderConfig, distance_m: float, angle_deg: float, seed: list[int]
 ) -> ViewOutcome:
     """Steps 1-5 of the module docstring for one view."""
     config = stack.config
@@ -205,7 +128,7 @@ def _evaluate_view(
     # 1. view, tag id, prior
     T_cam_tag, T_map_cam = sample_wall_view(distance_m, np.deg2rad(angle_deg), rng, config.tilt_deg)
     tag_id = int(rng.integers(stack.num_ids))
-    prior = None if config.prior == "none" else _pose_prior(config, T_map_cam, rng)
+    prior = None if config.prior == "none" else pose_prior(config, T_map_cam, rng)
     # 2. render
     image, truths = render_tags_scene(
         stack.camera,
@@ -284,16 +207,13 @@ def run_tag_sweep(config: TagSweepConfig, progress: ProgressFn | None = None) ->
         If the backend or family is unknown, or a detector option is bad.
     """
     started = time.perf_counter()
-    stack = _Stack(
-        config,
-        config.camera_model(),
-        make_detector(config.backend, config.family, **config.detector_options),
-        config.noise_model(),
-        family_spec(config.family).num_ids,
-    )
+    stack = SweepStack.from_config(config)
     cells = list(
         itertools.product(config.blur_px, config.noise_dn, config.distances_m, config.angles_deg)
     )
+    joint_cells = list(itertools.product(config.joint_tag_counts, config.joint_distances_m))
+    total = (len(cells) + len(joint_cells)) * config.trials
+    # 1. single tags, every cell
     rows: list[TagSweepRow] = []
     views: list[ViewOutcome] = []
     for i, (blur, noise, distance, angle) in enumerate(cells):
@@ -305,12 +225,25 @@ def run_tag_sweep(config: TagSweepConfig, progress: ProgressFn | None = None) ->
         rows.append(cell_row(distance, angle, blur, noise, outcomes))
         views += outcomes
         if progress is not None:
-            progress((i + 1) * config.trials, len(cells) * config.trials)
+            progress((i + 1) * config.trials, total)
+    # 2. joint PnP over a face-on row of tags (reference condition)
+    joint_rows: list[JointRow] = []
+    for j, (n_tags, distance) in enumerate(joint_cells):
+        seed = [config.seed, 1_000_000_000 + n_tags, round(1e6 * distance)]
+        seeds = [[*seed, k] for k in range(config.trials)]
+        joint_rows.append(joint_cell(stack, n_tags, distance, seeds))
+        if progress is not None:
+            progress((len(cells) + j + 1) * config.trials, total)
     accepted_nees = [v.nees for v in views if v.accepted]
+    targets = config.targets
+    checks = sweep_checks(config, rows) + joint_checks(
+        joint_rows, targets.joint_rotation_median_deg, targets.joint_rotation_distance_m
+    )
     return TagSweepResult(
         config=config,
         rows=tuple(rows),
-        checks=tuple(sweep_checks(config, rows)),
+        joint_rows=tuple(joint_rows),
+        checks=tuple(checks),
         nees_per_dof=float(np.mean(accepted_nees)) / 6.0 if accepted_nees else float("nan"),
         detect_ms=1e3 * float(np.median([v.detect_s for v in views])),
         rest_ms=1e3 * float(np.median([v.rest_s for v in views if v.detected] or [np.nan])),

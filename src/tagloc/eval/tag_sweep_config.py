@@ -35,12 +35,14 @@ from tagloc.tags.gates import GateConfig
 DEFAULT_SIGMA_PX = {"apriltag": 0.1, "aruco": 0.2}
 
 #: The grid of ``tagloc eval tags --quick``: 1, 2 and 4 m at 0, 30 and 60 deg, sharp, default
-#: sensor noise, 4 views a cell (36 views, a few seconds).
+#: sensor noise, and 2 tags face-on at 2 m, 4 views a cell (40 views, a few seconds).
 QUICK_GRID: dict[str, Any] = {
     "distances_m": (1.0, 2.0, 4.0),
     "angles_deg": (0.0, 30.0, 60.0),
     "blur_px": (0.0,),
     "noise_dn": (1.5,),
+    "joint_tag_counts": (2,),
+    "joint_distances_m": (2.0,),
     "trials": 4,
 }
 
@@ -62,6 +64,8 @@ class TagSweepTargets(BaseModel):
     acceptance_min: float = Field(0.9, ge=0, le=1, description="pooled acceptance of ...")
     acceptance_max_distance_m: float = Field(3.0, gt=0, description="... views within this")
     acceptance_angles_deg: tuple[float, float] = Field((15.0, 60.0), description="... and these")
+    joint_rotation_median_deg: float = Field(1.0, gt=0, description="joint PnP, face-on ...")
+    joint_rotation_distance_m: float = Field(2.0, gt=0, description="... at this distance")
 
 
 class TagSweepConfig(BaseModel):
@@ -88,6 +92,10 @@ class TagSweepConfig(BaseModel):
         camera rotation off by ``prior_rotation_error_deg`` per axis with 1-sigma
         ``prior_sigma_deg``, plus gravity off by ``gravity_error_deg``: what the localizer's
         filter gives), ``"gravity"`` (gravity alone) or ``"none"``.
+    Joint PnP
+        ``joint_tag_counts`` x ``joint_distances_m``: rows of that many tags ``joint_spacing_m``
+        apart seen face-on from that far (reference condition, ``trials`` views each;
+        empty: none), :mod:`tagloc.eval.tag_sweep_joint`.
     Rendering
         ``render`` is the renderer's config; ``defocus_sigma_px`` and ``read_noise_dn`` are set
         per cell. ``background_albedo`` is the flat backdrop.
@@ -115,6 +123,9 @@ class TagSweepConfig(BaseModel):
     prior_sigma_deg: float = Field(3.0, gt=0.0)
     gravity_error_deg: float = Field(1.0, ge=0.0)
     tilt_deg: float = Field(1.0, ge=0.0, le=10.0)
+    joint_tag_counts: tuple[int, ...] = (2, 4)
+    joint_distances_m: tuple[float, ...] = (1.0, 2.0, 3.0)
+    joint_spacing_m: float = Field(0.3, gt=0.0, le=2.0)
     render: RenderConfig = Field(default_factory=RenderConfig)
     background_albedo: float = Field(0.5, ge=0.0, le=1.0)
     targets: TagSweepTargets = Field(default_factory=TagSweepTargets)
@@ -137,6 +148,15 @@ class TagSweepConfig(BaseModel):
         if len(set(values)) != len(values):
             raise ValueError("values must be distinct")
         return tuple(sorted(values))
+
+    @field_validator("joint_tag_counts", "joint_distances_m")
+    @classmethod
+    def _joint_axis(cls, values: tuple[float, ...], info: ValidationInfo) -> tuple[float, ...]:
+        low, high = (2, 8) if info.field_name == "joint_tag_counts" else (0.3, 20.0)
+        for v in values:
+            if not low <= v <= high:
+                raise ValueError(f"value {v:g} outside [{low:g}, {high:g}] (or leave it empty)")
+        return tuple(sorted(set(values)))
 
     @classmethod
     def quick(cls, **overrides: Any) -> TagSweepConfig:

@@ -1,4 +1,5 @@
-"""Files of a tag-sensor sweep: ``tag_sweep.csv``, ``tag_sweep.md``, the config and the plots.
+"""Files of a tag-sensor sweep: ``tag_sweep.csv``, ``tag_sweep_joint.csv``, ``tag_sweep.md``,
+the config and the plots.
 
 :func:`format_csv` and :func:`format_markdown` are pure (text in, text out);
 :func:`write_tag_sweep` writes every file atomically (temporary file beside it, then rename).
@@ -9,12 +10,14 @@ cell; ``det`` and ``acc``: detection and acceptance rate of its views; ``pos med
 ambiguity flips; ``NEES/dof``: mean NEES of the accepted estimates over 6 (1 is honest, below 1
 conservative); ``corner px``: RMS corner error of the detections; ``detect`` / ``rest`` (ms):
 median time per frame of detection, and of PnP + covariance + gates; ``rejected``: why the other
-views were not accepted.
+views were not accepted. The joint table: ``joint acc``, the fraction of frames with an accepted
+joint estimate; its errors (of ``T_map_cam``); the best single tag's rotation error; NEES/dof.
 """
 
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import math
 import os
@@ -22,7 +25,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from tagloc.eval.summary import Check
-from tagloc.eval.tag_sweep import TagSweepResult
+from tagloc.eval.tag_sweep import JointRow, TagSweepResult
 from tagloc.eval.tag_sweep_config import save_tag_sweep_config
 from tagloc.eval.tag_sweep_plots import plot_tag_sweep_errors, plot_tag_sweep_rates
 from tagloc.eval.tag_sweep_stats import TagSweepRow
@@ -31,6 +34,7 @@ from tagloc.fileutil import atomic_write_text
 #: Files :func:`write_tag_sweep` writes, in order.
 SWEEP_FILES = (
     "tag_sweep.csv",
+    "tag_sweep_joint.csv",
     "tag_sweep.md",
     "tag_sweep_config.yaml",
     "tag_sweep_errors.png",
@@ -68,6 +72,39 @@ def format_csv(rows: Sequence[TagSweepRow]) -> str:
         ]  # fmt: skip
         writer.writerow([*cells, format_rejections(r.rejections)])
     return buffer.getvalue()
+
+
+JOINT_CSV_COLUMNS = tuple(f.name for f in dataclasses.fields(JointRow))
+
+
+def format_joint_csv(rows: Sequence[JointRow]) -> str:
+    """One line per joint cell, columns :data:`JOINT_CSV_COLUMNS` (NaN empty)."""
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(JOINT_CSV_COLUMNS)
+    for r in rows:
+        values = [getattr(r, c) for c in JOINT_CSV_COLUMNS]
+        writer.writerow(
+            ["" if isinstance(v, float) and math.isnan(v) else f"{v:.6g}" for v in values]
+        )
+    return buffer.getvalue()
+
+
+def joint_markdown_table(rows: Sequence[JointRow]) -> list[str]:
+    """The joint cells as markdown table lines."""
+    lines = [
+        "| tags | dist (m) | joint acc | rot med (deg) | rot p95 (deg) | pos med (cm) "
+        "| best single rot med (deg) | NEES/dof |",
+        "|" + "---:|" * 8,
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r.n_tags} | {r.distance_m:g} | {_num(r.joint_rate, 2)} "
+            f"| {_num(r.rotation_error_median_deg, 2)} | {_num(r.rotation_error_p95_deg, 2)} "
+            f"| {_num(r.position_error_median_m, 2, 100)} "
+            f"| {_num(r.best_single_rotation_median_deg, 2)} | {_num(r.nees_per_dof, 2)} |"
+        )
+    return lines
 
 
 def markdown_table(rows: Sequence[TagSweepRow]) -> list[str]:
@@ -121,6 +158,14 @@ def format_markdown(result: TagSweepResult) -> str:
         reference = " (reference condition)" if (blur, read) == c.reference_condition else ""
         lines += [f"Blur {blur:g} px, read noise {read:g} DN{reference}:", ""]
         lines += [*markdown_table(rows), ""]
+    if result.joint_rows:
+        lines += [
+            f"Joint PnP, tags {c.joint_spacing_m:g} m apart seen face-on, reference condition "
+            "(best single: the frame's single-tag estimate nearest the truth, before gates):",
+            "",
+            *joint_markdown_table(result.joint_rows),
+            "",
+        ]
     lines += [
         f"{result.n_views} views in {result.elapsed_s:.0f} s; accepted ambiguity flips: "
         f"{result.flips}; mean NEES/dof of accepted estimates: {_num(result.nees_per_dof, 2)}; "
@@ -144,8 +189,9 @@ def write_tag_sweep(result: TagSweepResult, out_dir: str | os.PathLike[str]) -> 
     out = Path(out_dir)
     paths = [out / name for name in SWEEP_FILES]
     atomic_write_text(paths[0], format_csv(result.rows))
-    atomic_write_text(paths[1], format_markdown(result))
-    save_tag_sweep_config(result.config, paths[2])
-    plot_tag_sweep_errors(result.rows, paths[3])
-    plot_tag_sweep_rates(result.rows, paths[4])
+    atomic_write_text(paths[1], format_joint_csv(result.joint_rows))
+    atomic_write_text(paths[2], format_markdown(result))
+    save_tag_sweep_config(result.config, paths[3])
+    plot_tag_sweep_errors(result.rows, paths[4])
+    plot_tag_sweep_rates(result.rows, paths[5])
     return paths
