@@ -12,7 +12,9 @@ Rows (1280x720, fx = 640, 0.16 m tags at 1-4 m and 15-60 deg, 0.3 px corner nois
 - ``estimate_joint_pose``: joint PnP alone, given the single-tag estimates.
 
 Each figure is the median over ``repeats`` timings of a loop (``time.perf_counter_ns``), given
-per frame and per tag.
+per frame and per tag. These costs do not depend on the image size; ``bench_detect.py`` sets
+them against the detector's own time on rendered 640x480 and 1280x720 frames (the issue's
+"everything after detection adds at most 30 %").
 """
 
 from __future__ import annotations
