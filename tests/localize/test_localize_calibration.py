@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 import pytest
-from test_localize_sim import FIX_COV, MS, S, Drive, make_filter, make_fix, square_path
+from test_localize_sim import FIX_COV, MS, Drive, S, make_filter, make_fix, square_path
 
 from tagloc.frames import TransformBuffer
 from tagloc.geometry import SE3, SO3

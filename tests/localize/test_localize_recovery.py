@@ -128,6 +128,25 @@ def test_kidnap_is_recovered_within_k_plus_a_few_fixes(seed: int) -> None:
     assert base_error(flt, drive, flt.stamp_ns)[0] < 0.1
 
 
+def test_a_kidnap_with_one_tag_in_view_relocalizes_from_it_alone() -> None:
+    rng, drive, _, flt, t_kidnap = _kidnap_drive(13)
+    run_fixes(flt, drive, rng, fix_stamps(drive, 10.0, stop_s=t_kidnap / S))
+    stamps = fix_stamps(drive, 10.0, start_s=t_kidnap / S, stop_s=t_kidnap / S + 3.0)
+    results = run_fixes(flt, drive, rng, stamps, sources=("tag:2",))
+    kinds = [event.kind for _, event in results]  # type: ignore[attr-defined]
+    n = 15  # KidnapConfig.n_fixes_one_source default: half a second of a 30 Hz camera
+    assert kinds[: n - 1] == [EventKind.GATED_CHI2] * (n - 1)
+    assert flt.events.count(EventKind.REINITIALIZED_KIDNAP) == 1
+    assert kinds[n:] == [EventKind.ACCEPTED] * (len(kinds) - n)
+    assert base_error(flt, drive, flt.stamp_ns)[0] < 0.1
+    # with the one-tag rule off, the same sightings never re-localize (a second tag is needed)
+    rng, drive, _, off, t_kidnap = _kidnap_drive(13)
+    off = make_filter(off._buffer, kidnap={"n_fixes_one_source": 0})
+    run_fixes(off, drive, rng, fix_stamps(drive, 10.0, stop_s=t_kidnap / S))
+    run_fixes(off, drive, rng, stamps, sources=("tag:2",))
+    assert off.events.count(EventKind.REINITIALIZED_KIDNAP) == 0
+
+
 def test_kidnap_detection_can_be_disabled() -> None:
     rng, drive, _, flt, t_kidnap = _kidnap_drive(13)
     flt_off = make_filter(flt._buffer, kidnap={"enabled": False})

@@ -117,13 +117,14 @@ class KidnapConfig(StrictModel):
     min_sources: int = Field(2, ge=1)
     #: The n fixes must lie within this window.
     window_s: float = Field(5.0, gt=0)
-    #: Or this many such fixes of a single source (0: never from one tag alone). After a kidnap
-    #: often one tag is in view; a tag moved since the survey and seen alone can then briefly
-    #: re-initialize the state wrongly (undone when the other tags disagree), while seen with
-    #: other tags it is flagged suspect after ``suspect.min_gated`` fixes, long before this.
-    #: Default 0: a wrong confident jump is worse than waiting for a second tag; 15 (half a
-    #: second of a 30 Hz camera) re-localizes from one tag.
-    n_fixes_one_source: int = Field(0, ge=0)
+    #: Or this many such fixes of a single source (0: never from one tag alone), each putting
+    #: the robot at least ``one_source_min_jump_m`` from where the filter thinks it is. After a
+    #: kidnap often one tag is in view: one tag seen for half a second (15 frames at 30 Hz)
+    #: re-localizes. The distance rule keeps a tag moved since the survey (by less than that)
+    #: from re-localizing the robot when seen alone; seen with other tags it is flagged suspect
+    #: after ``suspect.min_gated`` fixes, long before this.
+    n_fixes_one_source: int = Field(15, ge=0)
+    one_source_min_jump_m: float = Field(1.0, ge=0)
 
 
 class SuspectConfig(StrictModel):

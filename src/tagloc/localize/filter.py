@@ -163,7 +163,8 @@ class MapOdomFilter:
         ``kidnap_min_sources`` sources within the window, with no accepted fix among them
         (``kidnap_n = 0`` disables it).
     kidnap_n_one_source : int
-        Or from this many such fixes of one source (0: never from one source).
+        Or from this many such fixes of one source (0: never from one source), each putting the
+        base at least ``kidnap_one_source_min_jump_m`` from the estimate.
     suspect_min_gated, suspect_clear_after : int
         See :class:`~tagloc.localize.gating.SourceMonitor`.
     suspect_spread : CorrectionCap
@@ -183,7 +184,7 @@ class MapOdomFilter:
         planar: bool, noise: ProcessNoise, chi2_quantile: float, quality: QualityLimits,
         k_consistent: int, consistency_window_ns: int, gap_ns: int, gap_m: float,
         cap: CorrectionCap, kidnap_n: int, kidnap_min_sources: int, kidnap_window_ns: int,
-        kidnap_n_one_source: int = 0,
+        kidnap_n_one_source: int = 0, kidnap_one_source_min_jump_m: float = 1.0,
         suspect_min_gated: int, suspect_clear_after: int, suspect_spread: CorrectionCap,
         max_iterations: int,
         relinearize_tol: float, history_size: int, max_events: int,
@@ -215,6 +216,7 @@ class MapOdomFilter:
             if kidnap_n_one_source > 0
             else None
         )
+        self._kidnap_one_min_m = kidnap_one_source_min_jump_m
         self._sources = SourceMonitor(suspect_min_gated, suspect_clear_after)
         self._last_gated: dict[str, Candidate] = {}  # per source, for the suspect test
         self._suspect_window_ns = kidnap_window_ns
@@ -278,6 +280,7 @@ class MapOdomFilter:
             kidnap_n=k.n_fixes if k.enabled else 0, kidnap_min_sources=k.min_sources,
             kidnap_window_ns=round(k.window_s * S_NS),
             kidnap_n_one_source=k.n_fixes_one_source if k.enabled else 0,
+            kidnap_one_source_min_jump_m=k.one_source_min_jump_m,
             suspect_min_gated=config.suspect.min_gated,
             suspect_clear_after=config.suspect.clear_after,
             suspect_spread=CorrectionCap(
@@ -505,7 +508,7 @@ class MapOdomFilter:
             elif self._kidnap_on:
                 self._kidnap.expire(fix.stamp_ns)
                 found = self._kidnap.add(cand)
-                if found is None and self._kidnap_one is not None:
+                if found is None and self._kidnap_one is not None and self._far(cand):
                     self._kidnap_one.expire(fix.stamp_ns)
                     found = self._kidnap_one.add(cand)
                 if found is not None:
@@ -522,6 +525,14 @@ class MapOdomFilter:
         event = self._event(fix.stamp_ns, EventKind.ACCEPTED, fix.source, d2)
         self._publish(fix.stamp_ns, snap=False)
         return event
+
+    def _far(self, cand: Candidate) -> bool:
+        """Whether a fix puts the base at least ``kidnap_one_source_min_jump_m`` from the
+        state's estimate: only such a fix may re-localize from one tag alone (a kidnap moves
+        the robot metres; a tag moved or mis-surveyed by less is flagged suspect instead)."""
+        X = self._require()
+        T = (X @ cand.A).inverse() @ cand.z  # type: ignore[operator]
+        return float(np.linalg.norm(T.translation)) >= self._kidnap_one_min_m
 
     def _reject_suspect(self, cand: Candidate) -> FilterEvent:
         """A fix of a suspect source: not applied; passing the gate counts toward clearing."""

@@ -6,7 +6,8 @@ built-in office world by :func:`build_scenario`:
 ============  ===================================================================================
 default       the route with legged odometry (drifting several % of distance)
 kidnap        at ``kidnap_at_s`` the robot is carried ``kidnap_skip_s`` further along the route:
-              the ground truth jumps, the odometry continues smoothly (spliced)
+              the ground truth jumps, the odometry continues smoothly (spliced); two tags in view
+kidnap_one_tag  the same, to a place where one tag alone is in view
 glint         false detections injected at ``glint_rate`` per frame (wrong ids, random quads)
 moved_tag     tag ``moved_tags`` physically moved after the map was made: observations come
               from the moved world, the map from the original
@@ -87,6 +88,12 @@ SCENARIOS: dict[str, ScenarioSpec] = {
         "room_b door where two tags are in view",
         kidnap_at_s=40.0,
         kidnap_skip_s=122.5,
+    ),
+    "kidnap_one_tag": ScenarioSpec(
+        "robot carried 75.6 s further along the route at t = 40 s (odometry unaware), into "
+        "room_c where one tag (17) alone is in view for 6 s",
+        kidnap_at_s=40.0,
+        kidnap_skip_s=75.6,
     ),
     "glint": ScenarioSpec(
         "false detections, 0.6 per frame (wrong ids on real corners, random quads)",
