@@ -158,6 +158,16 @@ def test_tiny_sweep_meets_the_issues_targets(tiny: TagSweepResult) -> None:
             _row(tiny, 4.0, angle).position_error_median_m
             > _row(tiny, 2.0, angle).position_error_median_m
         )
+    # A fix's position (the camera's, in the tag frame) adds rotation error x range: per view
+    # |e_cam| <= |e_tag| + theta d, so its median is below the bound of the two p95s.
+    for r in tiny.rows:
+        lever = math.radians(r.rotation_error_p95_deg) * r.distance_m
+        assert r.camera_position_error_median_m <= r.position_error_p95_m + lever
+    assert all(
+        r.camera_position_error_median_m > r.position_error_median_m
+        for r in tiny.rows
+        if r.distance_m == 4.0
+    )
     assert all(0.05 < r.nees_per_dof < 5.0 for r in tiny.rows)
     assert all(r.nees_per_dof < 1.0 for r in tiny.rows if r.distance_m == 2.0)
     assert 0.5 <= tiny.nees_per_dof <= 2.0

@@ -77,10 +77,10 @@ def print_tag_sweep(result: TagSweepResult) -> None:
     def num(value: float, digits: int, scale: float = 1.0) -> str:
         return f"{value * scale:.{digits}f}" if value == value else "-"  # NaN -> "-"
 
-    console = Console(width=170)
+    console = Console(width=190)
     columns = ("dist m", "angle", "det", "acc", "pos med cm", "pos p95 cm", "rot med deg",
-               "rot p95 deg", "flips", "NEES/dof", "corner px", "detect ms", "rest ms",
-               "rejected")  # fmt: skip
+               "rot p95 deg", "cam pos med cm", "flips", "NEES/dof", "corner px", "detect ms",
+               "rest ms", "rejected")  # fmt: skip
     for blur, noise in conditions(result.rows):
         table = Table(title=f"tag sweep: blur {blur:g} px, read noise {noise:g} DN")
         for column in columns:
@@ -90,7 +90,8 @@ def print_tag_sweep(result: TagSweepResult) -> None:
                 f"{r.distance_m:g}", f"{r.angle_deg:g}", num(r.detection_rate, 2),
                 num(r.acceptance_rate, 2), num(r.position_error_median_m, 2, 100),
                 num(r.position_error_p95_m, 2, 100), num(r.rotation_error_median_deg, 2),
-                num(r.rotation_error_p95_deg, 2), str(r.flips), num(r.nees_per_dof, 2),
+                num(r.rotation_error_p95_deg, 2), num(r.camera_position_error_median_m, 2, 100),
+                str(r.flips), num(r.nees_per_dof, 2),
                 num(r.corner_rms_px, 2), num(r.detect_ms, 1), num(r.rest_ms, 1),
                 format_rejections(r.rejections),
             )  # fmt: skip

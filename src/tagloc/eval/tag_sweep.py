@@ -11,7 +11,8 @@
 4. runs :func:`tagloc.tags.observe_tags` (PnP with both IPPE branches, covariance, gates and the
    ambiguity policy; timed: ``rest``) with the tag's exact map pose;
 5. scores the accepted estimate of the true tag against the renderer's ground truth: position
-   and rotation error of ``T_cam_tag``, NEES, and whether it is an ambiguity flip
+   and rotation error of ``T_cam_tag``, the error of the camera's position in the tag frame
+   (what a fix's position error is), NEES, and whether it is an ambiguity flip
    (:func:`is_ambiguity_flip`).
 
 Then, for joint PnP, face-on rows of 2 or more tags (:mod:`tagloc.eval.tag_sweep_joint`).
@@ -173,11 +174,13 @@ def _evaluate_view(
     if not accepted:
         return outcome
     est = accepted[0]
+    camera_in_tag = est.T_cam_tag.inverse().translation - T_cam_tag.inverse().translation
     return outcome.scored(
         position_error_m=float(np.linalg.norm(est.T_cam_tag.translation - T_cam_tag.translation)),
         rotation_error_deg=rotation_error_deg(T_cam_tag, est.T_cam_tag),
         flip=is_ambiguity_flip(T_cam_tag, est),
         nees=float(nees(T_cam_tag, est.T_cam_tag, est.cov_cam_tag)),
+        camera_position_error_m=float(np.linalg.norm(camera_in_tag)),
     )
 
 

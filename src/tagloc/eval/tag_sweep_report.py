@@ -6,7 +6,8 @@ the config and the plots.
 
 Markdown columns (one table per blur/noise condition): ``dist`` (m) and ``angle`` (deg) of the
 cell; ``det`` and ``acc``: detection and acceptance rate of its views; ``pos med`` / ``pos p95``
-(cm) and ``rot med`` / ``rot p95`` (deg): error of the accepted ``T_cam_tag``; ``flips``: accepted
+(cm) and ``rot med`` / ``rot p95`` (deg): error of the accepted ``T_cam_tag``; ``cam pos med``
+(cm): error of the camera's position in the tag frame, i.e. of a fix; ``flips``: accepted
 ambiguity flips; ``NEES/dof``: mean NEES of the accepted estimates over 6 (1 is honest, below 1
 conservative); ``corner px``: RMS corner error of the detections; ``detect`` / ``rest`` (ms):
 median time per frame of detection, and of PnP + covariance + gates; ``rejected``: why the other
@@ -44,7 +45,8 @@ SWEEP_FILES = (
 CSV_COLUMNS = (
     "distance_m", "angle_deg", "blur_px", "noise_dn", "n_views", "n_detected", "n_accepted",
     "detection_rate", "acceptance_rate", "position_error_median_m", "position_error_p95_m",
-    "rotation_error_median_deg", "rotation_error_p95_deg", "flips", "nees_per_dof",
+    "rotation_error_median_deg", "rotation_error_p95_deg", "camera_position_error_median_m",
+    "camera_position_error_p95_m", "flips", "nees_per_dof",
     "corner_rms_px", "detect_ms", "rest_ms", "false_detections", "rejections",
 )  # fmt: skip
 
@@ -111,15 +113,18 @@ def markdown_table(rows: Sequence[TagSweepRow]) -> list[str]:
     """The rows of one condition as markdown table lines (columns in the module docstring)."""
     lines = [
         "| dist (m) | angle (deg) | det | acc | pos med (cm) | pos p95 (cm) | rot med (deg) "
-        "| rot p95 (deg) | flips | NEES/dof | corner px | detect (ms) | rest (ms) | rejected |",
-        "|" + "---:|" * 13 + "---|",
+        "| rot p95 (deg) | cam pos med (cm) | flips | NEES/dof | corner px | detect (ms) "
+        "| rest (ms) | rejected |",
+        "|" + "---:|" * 14 + "---|",
     ]
     for r in rows:
         lines.append(
             f"| {r.distance_m:g} | {r.angle_deg:g} | {_num(r.detection_rate, 2)} "
             f"| {_num(r.acceptance_rate, 2)} | {_num(r.position_error_median_m, 2, 100)} "
             f"| {_num(r.position_error_p95_m, 2, 100)} | {_num(r.rotation_error_median_deg, 2)} "
-            f"| {_num(r.rotation_error_p95_deg, 2)} | {r.flips} | {_num(r.nees_per_dof, 2)} "
+            f"| {_num(r.rotation_error_p95_deg, 2)} "
+            f"| {_num(r.camera_position_error_median_m, 2, 100)} | {r.flips} "
+            f"| {_num(r.nees_per_dof, 2)} "
             f"| {_num(r.corner_rms_px, 2)} | {_num(r.detect_ms, 1)} | {_num(r.rest_ms, 1)} "
             f"| {format_rejections(r.rejections)} |"
         )

@@ -44,6 +44,9 @@ class ViewOutcome:
         Detections of other ids.
     position_error_m, rotation_error_deg, nees : float
         Of the accepted ``T_cam_tag`` against the truth (NaN if not accepted).
+    camera_position_error_m : float
+        Error of the camera's position in the tag's frame (``T_cam_tag^-1``), which is what a
+        fix's position error is for an exactly surveyed tag: it adds rotation error times range.
     flip : bool
         The accepted estimate took the wrong IPPE branch.
     """
@@ -59,9 +62,15 @@ class ViewOutcome:
     rotation_error_deg: float = math.nan
     nees: float = math.nan
     flip: bool = False
+    camera_position_error_m: float = math.nan
 
     def scored(
-        self, position_error_m: float, rotation_error_deg: float, flip: bool, nees: float
+        self,
+        position_error_m: float,
+        rotation_error_deg: float,
+        flip: bool,
+        nees: float,
+        camera_position_error_m: float = math.nan,
     ) -> ViewOutcome:
         """The same view with the accepted estimate's errors."""
         return dataclasses.replace(
@@ -70,6 +79,7 @@ class ViewOutcome:
             rotation_error_deg=rotation_error_deg,
             flip=flip,
             nees=nees,
+            camera_position_error_m=camera_position_error_m,
         )
 
 
@@ -87,6 +97,9 @@ class TagSweepRow:
     position_error_median_m, position_error_p95_m : float
         Of ``T_cam_tag``'s translation, accepted views (NaN if none).
     rotation_error_median_deg, rotation_error_p95_deg : float
+    camera_position_error_median_m, camera_position_error_p95_m : float
+        Of the camera's position in the tag frame (a fix's position error; see
+        :class:`ViewOutcome`).
     flips : int
         Accepted ambiguity flips.
     nees_per_dof : float
@@ -114,6 +127,8 @@ class TagSweepRow:
     position_error_p95_m: float
     rotation_error_median_deg: float
     rotation_error_p95_deg: float
+    camera_position_error_median_m: float
+    camera_position_error_p95_m: float
     flips: int
     nees_per_dof: float
     corner_rms_px: float
@@ -140,6 +155,7 @@ def cell_row(
     corner = [v.corner_sq_px2 for v in views if v.detected and math.isfinite(v.corner_sq_px2)]
     position = [v.position_error_m for v in accepted]
     rotation = [v.rotation_error_deg for v in accepted]
+    camera = [v.camera_position_error_m for v in accepted]
     n_detected = sum(v.detected for v in views)
     reasons = Counter(v.rejection for v in views if v.rejection is not None)
     return TagSweepRow(
@@ -156,6 +172,8 @@ def cell_row(
         position_error_p95_m=_stat(position, 95),
         rotation_error_median_deg=_stat(rotation, 50),
         rotation_error_p95_deg=_stat(rotation, 95),
+        camera_position_error_median_m=_stat(camera, 50),
+        camera_position_error_p95_m=_stat(camera, 95),
         flips=sum(v.flip for v in accepted),
         nees_per_dof=float(np.mean([v.nees for v in accepted])) / POSE_DOF
         if accepted
