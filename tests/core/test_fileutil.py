@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -26,3 +27,12 @@ def test_failed_write_keeps_old_content_and_leaves_no_temp(tmp_path: Path) -> No
         raise RuntimeError("writer crashed")
     assert target.read_text() == "good"
     assert [p.name for p in tmp_path.iterdir()] == ["out.png"]
+
+
+def test_outputs_get_the_permissions_of_a_new_file(tmp_path: Path) -> None:
+    mask = os.umask(0o022)
+    try:
+        atomic_write_text(tmp_path / "out.txt", "x")
+    finally:
+        os.umask(mask)
+    assert (tmp_path / "out.txt").stat().st_mode & 0o777 == 0o644
