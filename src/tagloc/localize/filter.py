@@ -772,10 +772,12 @@ class MapOdomFilter:
         ``nu(X (+) dx, c + dc) ~ nu - H [dx, dc]``, with ``H = [H_f Ad(Exp(-u)), H_f Jr(u) M]``
         and ``H_f = Jl^-1(nu) Ad(A^-1)`` (``Jl^-1(nu) = Jr^-1(-nu)``), the Jacobian at the
         state moved to the fix's stamp."""
-        if not self._nc:  # no calibration: the state is compared as it is
+        u = M @ c if self._nc else None
+        if u is None or not u.any():  # the fix is at the state's stamp (or no calibration)
             nu = cand.z.minus(X @ cand.A)  # type: ignore[operator, arg-type]
-            return nu, _jr_inv(-nu) @ cand.Ad_A_inv
-        E, Jr_u = type(X).exp(M @ c, jacobians=True)
+            H_f = _jr_inv(-nu) @ cand.Ad_A_inv
+            return nu, (np.hstack([H_f, H_f @ M]) if self._nc else H_f)
+        E, Jr_u = type(X).exp(u, jacobians=True)
         nu = cand.z.minus(X @ E @ cand.A)  # type: ignore[operator, arg-type]
         H_f = _jr_inv(-nu) @ cand.Ad_A_inv
         return nu, np.hstack([H_f @ E.inverse().adjoint(), H_f @ Jr_u @ M])
