@@ -12,13 +12,14 @@ rejects, from combined evidence in chi-square units (``2 ln`` of a likelihood ra
   a threshold ``L`` with probability below ``P(chi2_2 > L) = exp(-L / 2)`` -- whatever the ratio
   ``err_best / err_alt`` is (flips happen at ratios 0.03 to 1 at range: a ratio gate cannot
   tell a lucky wrong fit from a right one; the noise model can).
-- **Prior** (:class:`OrientationPrior`): a predicted ``R_cam_tag`` (prior ``T_map_cam`` and the
-  tag's map pose) and/or gravity (the camera's up direction from the extrinsics of an upright
-  robot, and the tag's up axis). The mirrored branch tilts the normal by about twice the viewing
-  angle, which a few-degree prior sees even where the pixels cannot. Its term is the difference
-  of the two branches' chi-squares against the prior, each with the branch's own likelihood
-  lobe added (its Laplace rotation covariance, widened along a low valley to the other branch:
-  two face-on branches straddling the truth are then both "near" the prior and stay ambiguous).
+- **Prior** (:class:`~tagloc.tags.prior.OrientationPrior`, evaluated there): a predicted
+  ``R_cam_tag`` (prior ``T_map_cam`` and the tag's map pose) and/or gravity (the camera's up
+  direction from the extrinsics of an upright robot, and the tag's up axis). The mirrored
+  branch tilts the normal by about twice the viewing angle, which a few-degree prior sees even
+  where the pixels cannot. Its term is the difference of the two branches' chi-squares against
+  the prior, each with the branch's own likelihood lobe added (its Laplace rotation
+  covariance, widened along a low valley to the other branch: two face-on branches straddling
+  the truth are then both "near" the prior and stay ambiguous).
 - **Joint PnP** over several tags is the strongest evidence (it has its own alternative and is
   decided by this same function), see :func:`tagloc.tags.observation.observe_tags`.
 
@@ -33,15 +34,32 @@ import math
 from dataclasses import dataclass
 from enum import StrEnum
 
-import cv2
-import numpy as np
-import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict, Field
 
 from tagloc.tags.detection import TagDetection
 from tagloc.tags.pnp import TagPoseEstimate
+from tagloc.tags.prior import (
+    OrientationPrior,
+    PriorEvidence,
+    prior_evidence,
+    tag_prior_evidence,
+    tag_prior_evidences,
+)
 
-FloatArray = npt.NDArray[np.float64]
+__all__ = [
+    "AmbiguityDecision",
+    "GateConfig",
+    "OrientationPrior",
+    "PriorEvidence",
+    "RejectReason",
+    "Rejection",
+    "check_detection",
+    "check_estimate",
+    "prior_evidence",
+    "resolve_ambiguity",
+    "tag_prior_evidence",
+    "tag_prior_evidences",
+]
 
 
 class RejectReason(StrEnum):
@@ -174,141 +192,6 @@ def check_estimate(estimate: TagPoseEstimate, config: GateConfig) -> Rejection |
             " deg",
         )
     return None
-
-
-@dataclass(frozen=True, slots=True)
-class OrientationPrior:
-    """What is known of ``R_cam_obj`` (``obj`` = a tag, or the map) before looking at pixels.
-
-    Attributes
-    ----------
-    R_cam_obj : (3, 3) float or None
-        Predicted rotation (e.g. ``R_map_cam^T R_map_tag`` from a prior ``T_map_cam``).
-    sigma_rad : float
-        Per-axis 1-sigma of that prediction.
-    up_cam : (3,) float or None
-        The world's up direction in the camera frame (``R_base_cam^T e_z`` for an upright robot).
-    up_obj : (3,) float
-        The object's axis that points up: tag ``+y`` for an upright tag on a wall (default), or
-        the tag's map pose ``R_map_tag^T e_z``; ``e_z`` for the map.
-    up_sigma_rad : float
-        1-sigma of the angle between the two up directions (robot tilt, tag mounting).
-    """
-
-    R_cam_obj: FloatArray | None = None
-    sigma_rad: float = 0.1
-    up_cam: FloatArray | None = None
-    up_obj: tuple[float, float, float] | FloatArray = (0.0, 1.0, 0.0)
-    up_sigma_rad: float = 0.05
-
-    def chi2(self, R_cam_obj: npt.ArrayLike, cov_rot: npt.ArrayLike | None = None) -> float:
-        """Prior chi-square of one candidate rotation (sum over the parts given).
-
-        Innovation tests with the candidate's own uncertainty added to the prior's:
-        ``e^T (sigma^2 I + C) e`` with ``e = Log(R_prior^T R)``; for gravity the tangent vector
-        ``g = up_cam x (R up_obj)`` (``|g|`` is the sine of the angle between the two up
-        directions) in a basis ``B`` of the plane normal to ``up_cam``, with covariance
-        ``up_sigma^2 I + (B^T J) C (B^T J)^T``, ``J = [u]x R [a]x = d(g)/d(phi)`` (2 dof).
-
-        Parameters
-        ----------
-        R_cam_obj : (3, 3) float
-        cov_rot : (3, 3) float, optional
-            Rotation block of the candidate's right-tangent covariance (zero if None).
-
-        Returns
-        -------
-        float
-        """
-        R = np.asarray(R_cam_obj, dtype=np.float64)
-        C = np.zeros((3, 3)) if cov_rot is None else np.asarray(cov_rot, dtype=np.float64)
-        total = 0.0
-        if self.R_cam_obj is not None:
-            e = np.ravel(cv2.Rodrigues(np.asarray(self.R_cam_obj).T @ R)[0])
-            total += float(e @ np.linalg.solve(self.sigma_rad**2 * np.eye(3) + C, e))
-        if self.up_cam is not None:
-            a = np.asarray(self.up_obj, dtype=np.float64)
-            u = np.asarray(self.up_cam, dtype=np.float64)
-            a, u = a / np.linalg.norm(a), u / np.linalg.norm(u)
-            e1 = _hat(u) @ (np.eye(3)[int(np.argmin(np.abs(u)))])
-            e1 /= np.linalg.norm(e1)
-            B = np.stack([e1, _hat(u) @ e1])  # (2, 3): orthonormal basis of the plane
-            BJ = B @ _hat(u) @ R @ _hat(a)
-            g = B @ (_hat(u) @ (R @ a))
-            S = self.up_sigma_rad**2 * np.eye(2) + BJ @ C @ BJ.T
-            total += float(g @ np.linalg.solve(S, g))
-        return total
-
-
-def _hat(v: FloatArray) -> FloatArray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-
-
-@dataclass(frozen=True, slots=True)
-class PriorEvidence:
-    """An :class:`OrientationPrior` evaluated on the two branches (:func:`prior_evidence`).
-
-    Attributes
-    ----------
-    chi2, chi2_alt : float
-        Prior chi-square of each branch with the branch's Laplace rotation covariance added
-        (the evidence ``N(R_prior; R_branch, S_prior + S_branch)`` up to a constant): their
-        difference is the prior's log-odds for the best branch.
-    innovation_chi2, innovation_chi2_alt : float
-        The same with each branch's full (inflated) rotation covariance: the consistency test
-        of the chosen branch against the prior.
-    """
-
-    chi2: float
-    chi2_alt: float
-    innovation_chi2: float
-    innovation_chi2_alt: float
-
-
-def prior_evidence(
-    prior: OrientationPrior,
-    R_best: npt.ArrayLike,
-    R_alt: npt.ArrayLike,
-    laplace_best: npt.ArrayLike,
-    laplace_alt: npt.ArrayLike,
-    cov_rot_best: npt.ArrayLike,
-    cov_rot_alt: npt.ArrayLike,
-) -> PriorEvidence:
-    """Evaluate ``prior`` on the two branches of an estimate of ``R_cam_obj``.
-
-    Parameters
-    ----------
-    prior : OrientationPrior
-    R_best, R_alt : (3, 3) float
-        The two branches' ``R_cam_obj``.
-    laplace_best, laplace_alt : (3, 3) float
-        Their Laplace rotation covariances (``TagPoseEstimate.cov_rot_laplace``).
-    cov_rot_best, cov_rot_alt : (3, 3) float
-        Rotation blocks of their full covariances.
-
-    Returns
-    -------
-    PriorEvidence
-    """
-    return PriorEvidence(
-        prior.chi2(R_best, laplace_best),
-        prior.chi2(R_alt, laplace_alt),
-        prior.chi2(R_best, cov_rot_best),
-        prior.chi2(R_alt, cov_rot_alt),
-    )
-
-
-def tag_prior_evidence(prior: OrientationPrior, estimate: TagPoseEstimate) -> PriorEvidence:
-    """:func:`prior_evidence` of a single-tag estimate (``obj`` = the tag)."""
-    return prior_evidence(
-        prior,
-        estimate.T_cam_tag.rotation.matrix,
-        estimate.T_cam_tag_alt.rotation.matrix,
-        estimate.cov_rot_laplace,
-        estimate.cov_rot_laplace_alt,
-        estimate.cov_cam_tag[3:, 3:],
-        estimate.cov_cam_tag_alt[3:, 3:],
-    )
 
 
 @dataclass(frozen=True, slots=True)

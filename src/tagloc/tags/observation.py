@@ -32,13 +32,14 @@ from tagloc.tags.detection import TagDetection
 from tagloc.tags.gates import (
     GateConfig,
     OrientationPrior,
+    PriorEvidence,
     Rejection,
     RejectReason,
     check_detection,
     check_estimate,
     prior_evidence,
     resolve_ambiguity,
-    tag_prior_evidence,
+    tag_prior_evidences,
 )
 from tagloc.tags.pnp import (
     JointPoseEstimate,
@@ -157,11 +158,24 @@ def _tag_prior(prior: PosePrior, T_map_tag: SE3 | None) -> OrientationPrior:
     return prior.for_object(T_map_tag.rotation.matrix, T_map_tag.rotation.inverse().act(_E_Z))
 
 
+def _tag_evidences(
+    prior: PosePrior | None,
+    tag_poses: Mapping[int, SE3] | None,
+    estimates: Sequence[TagPoseEstimate],
+) -> list[PriorEvidence | None]:
+    """The prior's evidence on both branches of every estimate (one numpy pass for all)."""
+    if prior is None:
+        return [None] * len(estimates)
+    priors = [
+        _tag_prior(prior, None if tag_poses is None else tag_poses[est.tag_id]) for est in estimates
+    ]
+    return list(tag_prior_evidences(priors, estimates))
+
+
 def _decide_tag(
-    est: TagPoseEstimate, config: GateConfig, noise: NoiseModel, prior: OrientationPrior | None
+    est: TagPoseEstimate, config: GateConfig, noise: NoiseModel, evidence: PriorEvidence | None
 ) -> TagPoseEstimate | Rejection:
     """Ambiguity policy, then the pose gates on the chosen branch (reprojection passed)."""
-    evidence = None if prior is None else tag_prior_evidence(prior, est)
     decision = resolve_ambiguity(
         est.sse_px2,
         est.sse_alt_px2,
@@ -298,12 +312,12 @@ def observe_tags(
             usable.append((det, size))
     # 2. PnP, all tags at once
     estimates = _safe_estimates(usable, camera, noise) if usable else []
-    # 3. per tag
-    accepted: list[TagPoseEstimate] = []
+    # 3. per tag: no pose, reprojection; then the policy (the prior on all tags in one pass)
     fitted: list[tuple[TagPoseEstimate, TagDetection]] = []
+    outcomes: list[Rejection | int] = []  # in detection order: a rejection or a fitted index
     for (det, _), est in zip(usable, estimates, strict=True):
         if est is None:
-            rejections.append(
+            outcomes.append(
                 Rejection(
                     det.tag_id,
                     RejectReason.DEGENERATE,
@@ -314,17 +328,22 @@ def observe_tags(
             continue
         rejection = check_estimate(est, config)
         if rejection is not None and rejection.reason is RejectReason.REPROJECTION:
-            rejections.append(rejection)
+            outcomes.append(rejection)
             continue
+        outcomes.append(len(fitted))
         fitted.append((est, det))
-        tag_prior = None
-        if prior is not None:
-            tag_prior = _tag_prior(prior, None if tag_poses is None else tag_poses[det.tag_id])
-        outcome = _decide_tag(est, config, noise, tag_prior)
-        if isinstance(outcome, Rejection):
-            rejections.append(outcome)
+    evidences = _tag_evidences(prior, tag_poses, [est for est, _ in fitted])
+    accepted: list[TagPoseEstimate] = []
+    for outcome in outcomes:
+        decided: TagPoseEstimate | Rejection
+        if isinstance(outcome, int):
+            decided = _decide_tag(fitted[outcome][0], config, noise, evidences[outcome])
         else:
-            accepted.append(outcome)
+            decided = outcome
+        if isinstance(decided, Rejection):
+            rejections.append(decided)
+        else:
+            accepted.append(decided)
     # 4. joint PnP over the known tags that fit (an id seen twice is a mirror or a misread)
     joint: JointPoseEstimate | None = None
     seen = Counter(est.tag_id for est, _ in fitted)

@@ -1,0 +1,122 @@
+"""Batched fast paths of the per-frame pipeline equal the per-tag computations they replace.
+
+Oracles: the plain per-call formulas (written out here, one rotation and one covariance at a
+time, as the module docstrings state them) and the per-tag calls of the public API.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+import pytest
+from test_pnp import CAMERA, corners_of, wall_view
+
+from tagloc.geometry import SE3, SO3
+from tagloc.tags.covariance import NoiseModel
+from tagloc.tags.gates import OrientationPrior, tag_prior_evidence, tag_prior_evidences
+from tagloc.tags.pnp import TagPoseEstimate, estimate_tag_poses
+
+FloatArray = npt.NDArray[np.float64]
+
+
+def _hat(v: FloatArray) -> FloatArray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def _reference_chi2(prior: OrientationPrior, R: FloatArray, C: FloatArray) -> float:
+    """:meth:`OrientationPrior.chi2` as its docstring states it, one rotation at a time."""
+    total = 0.0
+    if prior.R_cam_obj is not None:
+        e = np.ravel(cv2.Rodrigues(np.asarray(prior.R_cam_obj).T @ R)[0])
+        total += float(e @ np.linalg.solve(prior.sigma_rad**2 * np.eye(3) + C, e))
+    if prior.up_cam is not None:
+        a = np.asarray(prior.up_obj, dtype=np.float64)
+        u = np.asarray(prior.up_cam, dtype=np.float64)
+        a, u = a / np.linalg.norm(a), u / np.linalg.norm(u)
+        e1 = _hat(u) @ np.eye(3)[int(np.argmin(np.abs(u)))]
+        e1 /= np.linalg.norm(e1)
+        B = np.stack([e1, _hat(u) @ e1])
+        BJ = B @ _hat(u) @ R @ _hat(a)
+        g = B @ (_hat(u) @ (R @ a))
+        S = prior.up_sigma_rad**2 * np.eye(2) + BJ @ C @ BJ.T
+        total += float(g @ np.linalg.solve(S, g))
+    return total
+
+
+def _frame_estimates(seed: int, n: int) -> tuple[list[TagPoseEstimate], list[SE3]]:
+    """``n`` tags of one frame (noisy corners) and each one's true ``T_map_tag``."""
+    rng = np.random.default_rng(seed)
+    views = [
+        wall_view(rng.uniform(0.7, 5.0), np.deg2rad(rng.uniform(5, 70)), rng) for _ in range(n)
+    ]
+    corners = np.array([corners_of(T) + rng.normal(0, 0.4, (4, 2)) for T, _ in views])
+    estimates = estimate_tag_poses(list(range(n)), corners, [0.16] * n, CAMERA, NoiseModel())
+    assert all(e is not None for e in estimates)
+    return [e for e in estimates if e is not None], [T_map_cam @ T for T, T_map_cam in views]
+
+
+def _priors(kind: str, T_map_tags: list[SE3], rng: np.random.Generator) -> list[OrientationPrior]:
+    R_map_cam = SO3.from_rotvec(0.05 * rng.normal(size=3)).matrix @ np.array(
+        [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]]
+    )
+    up_cam = None if kind == "rotation" else R_map_cam.T @ np.array([0.0, 0.0, 1.0])
+    out = []
+    for T in T_map_tags:
+        R_cam_tag = None if kind == "gravity" else R_map_cam.T @ T.rotation.matrix
+        up_tag = T.rotation.matrix.T @ np.array([0.0, 0.0, 1.0])
+        out.append(OrientationPrior(R_cam_tag, 0.05, up_cam, up_tag, 0.04))
+    return out
+
+
+@pytest.mark.parametrize("kind", ["rotation", "gravity", "both"])
+def test_chi2_equals_the_per_rotation_formula(kind: str) -> None:
+    rng = np.random.default_rng(3)
+    estimates, T_map_tags = _frame_estimates(11, 5)
+    for prior, est in zip(_priors(kind, T_map_tags, rng), estimates, strict=True):
+        for T, C in (
+            (est.T_cam_tag, est.cov_rot_laplace),
+            (est.T_cam_tag_alt, est.cov_cam_tag_alt[3:, 3:]),
+            (SE3.random(rng), np.zeros((3, 3))),
+        ):
+            R = T.rotation.matrix
+            expected = _reference_chi2(prior, R, C)
+            assert prior.chi2(R, C) == pytest.approx(expected, rel=1e-12, abs=1e-12)
+            if not C.any():
+                assert prior.chi2(R) == pytest.approx(expected, rel=1e-12, abs=1e-12)
+
+
+@pytest.mark.parametrize("kind", ["rotation", "gravity", "both"])
+@pytest.mark.parametrize("n", [1, 2, 6])
+def test_tag_prior_evidences_equal_per_tag(kind: str, n: int) -> None:
+    rng = np.random.default_rng(n)
+    estimates, T_map_tags = _frame_estimates(20 + n, n)
+    priors = _priors(kind, T_map_tags, rng)
+    batched = tag_prior_evidences(priors, estimates)
+    for prior, est, got in zip(priors, estimates, batched, strict=True):
+        one = tag_prior_evidence(prior, est)
+        for name in ("chi2", "chi2_alt", "innovation_chi2", "innovation_chi2_alt"):
+            assert getattr(got, name) == pytest.approx(getattr(one, name), rel=1e-9, abs=1e-12)
+            expected = _reference_chi2(
+                prior,
+                (est.T_cam_tag_alt if name.endswith("alt") else est.T_cam_tag).rotation.matrix,
+                {
+                    "chi2": est.cov_rot_laplace,
+                    "chi2_alt": est.cov_rot_laplace_alt,
+                    "innovation_chi2": est.cov_cam_tag[3:, 3:],
+                    "innovation_chi2_alt": est.cov_cam_tag_alt[3:, 3:],
+                }[name],
+            )
+            assert getattr(got, name) == pytest.approx(expected, rel=1e-9, abs=1e-12)
+
+
+def test_tag_prior_evidences_with_mixed_priors_fall_back_per_tag() -> None:
+    rng = np.random.default_rng(5)
+    estimates, T_map_tags = _frame_estimates(31, 3)
+    priors = _priors("both", T_map_tags, rng)
+    priors[1] = OrientationPrior(None, 0.1, priors[0].up_cam, priors[1].up_obj, 0.02)
+    batched = tag_prior_evidences(priors, estimates)
+    for prior, est, got in zip(priors, estimates, batched, strict=True):
+        assert got == tag_prior_evidence(prior, est)
+    with pytest.raises(ValueError, match="2 priors for 3 estimates"):
+        tag_prior_evidences(priors[:2], estimates)
