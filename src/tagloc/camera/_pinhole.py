@@ -20,7 +20,7 @@ from tagloc.camera import _fields
 from tagloc.camera.model import BoolArray, FloatArray, as_vectors
 from tagloc.errors import CameraModelError
 
-#: (xd, yd, J_d_n) where J_d_n is (N, 2, 2) or None.
+#: (xd, yd, J_d_n) where J_d_n is (N, 2, 2), or None: not asked for, or the identity.
 Distorted = tuple[FloatArray, FloatArray, FloatArray | None]
 
 
@@ -65,7 +65,8 @@ class _Pinhole:
         raise NotImplementedError
 
     def _distort(self, x: FloatArray, y: FloatArray, jacobian: bool) -> Distorted:
-        """Distorted normalized coordinates (and ``d(xd, yd)/d(x, y)``) of normalized ``x, y``."""
+        """Distorted normalized coordinates (and ``d(xd, yd)/d(x, y)``, None if the identity) of
+        normalized ``x, y`` (NaN at the same points)."""
         raise NotImplementedError
 
     def _undistort_normalized(self, xd: FloatArray, yd: FloatArray) -> tuple[FloatArray, ...]:
@@ -154,20 +155,24 @@ class _Pinhole:
             inv_z = 1.0 / z
             a, b = x * inv_z, y * inv_z
             valid = (z > 0.0) & (a * a + b * b < self._max_radius**2)
-            a, b, inv_z = (np.where(valid, c, np.nan) for c in (a, b, inv_z))
+            all_valid = bool(valid.all())
+            if not all_valid:
+                a, b, inv_z = (np.where(valid, c, np.nan) for c in (a, b, inv_z))
             xd, yd, J_d_n = self._distort(a, b, jacobian)
-        pixels = np.stack([self.fx * xd + self.cx, self.fy * yd + self.cy], axis=-1)
-        if J_d_n is None:
+        pixels = np.empty((len(a), 2))
+        pixels[:, 0] = self.fx * xd + self.cx
+        pixels[:, 1] = self.fy * yd + self.cy
+        if not jacobian:
             return (pixels[0] if single else pixels), None
         J_n_point = np.zeros((len(a), 2, 3))
         J_n_point[:, 0, 0] = inv_z
         J_n_point[:, 1, 1] = inv_z
         J_n_point[:, 0, 2] = -a * inv_z
         J_n_point[:, 1, 2] = -b * inv_z
-        J_px_point = J_d_n @ J_n_point
-        J_px_point[:, 0, :] *= self.fx
-        J_px_point[:, 1, :] *= self.fy
-        J_px_point[~valid] = np.nan
+        J_px_point = J_n_point if J_d_n is None else J_d_n @ J_n_point
+        J_px_point *= np.array([[self.fx], [self.fy]])
+        if not all_valid:
+            J_px_point[~valid] = np.nan
         return (pixels[0], J_px_point[0]) if single else (pixels, J_px_point)
 
     def undistort(self, pixels: npt.ArrayLike) -> FloatArray:

@@ -96,15 +96,29 @@ class PinholeRadtan(_Pinhole):
         return fold, fold
 
     def _distort(self, x: FloatArray, y: FloatArray, jacobian: bool) -> Distorted:
+        # Terms of zero coefficients are left out: for finite x, y they would add exactly +-0.
         k1, k2, k3, p1, p2 = self.k1, self.k2, self.k3, self.p1, self.p2
+        tangential = p1 != 0.0 or p2 != 0.0
+        if k1 == k2 == k3 == 0.0 and not tangential:
+            return x, y, None  # no distortion: the identity, J_d_n = I
         r2 = x * x + y * y
-        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3) if k3 != 0.0 else k1 + r2 * k2)
         xy2 = 2.0 * x * y
-        xd = x * radial + p1 * xy2 + p2 * (r2 + 2.0 * x * x)
-        yd = y * radial + p1 * (r2 + 2.0 * y * y) + p2 * xy2
+        if tangential:
+            xd = x * radial + p1 * xy2 + p2 * (r2 + 2.0 * x * x)
+            yd = y * radial + p1 * (r2 + 2.0 * y * y) + p2 * xy2
+        else:
+            xd, yd = x * radial, y * radial
         if not jacobian:
             return xd, yd, None
-        dradial = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)  # d(radial)/d(r^2)
+        # d(radial)/d(r^2)
+        dradial = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2) if k3 != 0.0 else k1 + r2 * (2.0 * k2)
+        if not tangential:
+            J_d_n = np.empty((len(x), 2, 2))
+            J_d_n[:, 0, 0] = radial + 2.0 * x * x * dradial
+            J_d_n[:, 0, 1] = J_d_n[:, 1, 0] = xy2 * dradial
+            J_d_n[:, 1, 1] = radial + 2.0 * y * y * dradial
+            return xd, yd, J_d_n
         cross = xy2 * dradial + 2.0 * (p1 * x + p2 * y)
         J_d_n = np.empty((len(x), 2, 2))
         J_d_n[:, 0, 0] = radial + 2.0 * x * x * dradial + 2.0 * p1 * y + 6.0 * p2 * x
@@ -117,6 +131,9 @@ class PinholeRadtan(_Pinhole):
         # 1. Radial part: exact 1-D inversion along the ray through the distorted point.
         coeffs = self._radial_coeffs()
         tangential = self.p1 != 0.0 or self.p2 != 0.0
+        identity = not tangential and coeffs == (0.0, 0.0, 0.0, 0.0)
+        if identity and np.isfinite(xd).all() and np.isfinite(yd).all():
+            return xd, yd  # no distortion: what the inversion below returns, exactly
         rd = target = np.hypot(xd, yd)
         if tangential and math.isfinite(self._t_max):
             # Tangential terms can push a point just inside the fold beyond the radial part's
