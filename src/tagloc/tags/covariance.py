@@ -102,14 +102,23 @@ def reprojection_covariance(jacobian: npt.ArrayLike, sigma_px: npt.ArrayLike) ->
     (K, 6, 6) float
     """
     J = np.asarray(jacobian, dtype=np.float64)
-    sigma = np.broadcast_to(np.asarray(sigma_px, dtype=np.float64), J.shape[:1])
+    return _scaled(_information_inverse(J), sigma_px)
+
+
+def _information_inverse(J: FloatArray) -> FloatArray:
+    """``(J^T J)^-1`` of (K, M, 6) Jacobians (pseudo-inverse if one is singular)."""
     info = np.swapaxes(J, 1, 2) @ J
     with np.errstate(all="ignore"):
         try:
-            cov = np.linalg.inv(info)
+            return np.asarray(np.linalg.inv(info))
         except np.linalg.LinAlgError:
-            cov = np.linalg.pinv(info, hermitian=True)
-    return _sym(sigma[:, None, None] ** 2 * cov)
+            return np.asarray(np.linalg.pinv(info, hermitian=True))
+
+
+def _scaled(info_inv: FloatArray, sigma_px: npt.ArrayLike) -> FloatArray:
+    """``sigma^2 (J^T J)^-1``, symmetrized, from :func:`_information_inverse`."""
+    sigma = np.broadcast_to(np.asarray(sigma_px, dtype=np.float64), info_inv.shape[:1])
+    return _sym(sigma[:, None, None] ** 2 * info_inv)
 
 
 def second_order_term(cov: npt.ArrayLike) -> FloatArray:
@@ -168,6 +177,55 @@ def pose_covariance(
     (K, 6, 6) float
         Right-tangent covariances, ``[x, y, z, rx, ry, rz]``; NaN where ``J`` holds NaN.
     """
+    J = np.asarray(jacobian, dtype=np.float64)
+    valley = None
+    if delta_other is not None and barrier_px2 is not None:
+        valley = _ValleyParts(J, delta_other, barrier_px2)
+    info_inv = _information_inverse(J)
+    return _pose_covariance(
+        info_inv, valley, R_cam_obj, t_cam_obj, extent_px, noise, view_angle_rad
+    )
+
+
+def pose_covariance_and_lobe(
+    jacobian: npt.ArrayLike,
+    R_cam_obj: npt.ArrayLike,
+    t_cam_obj: npt.ArrayLike,
+    extent_px: npt.ArrayLike,
+    noise: NoiseModel,
+    view_angle_rad: npt.ArrayLike,
+    delta_other: npt.ArrayLike,
+    barrier_px2: npt.ArrayLike,
+) -> tuple[FloatArray, FloatArray]:
+    """:func:`pose_covariance` and the likelihood lobe ``sigma_px^2 (J^T J)^-1`` plus
+    :func:`valley_term` (at ``sigma_px``, no other inflation) from one ``(J^T J)^-1``.
+
+    Parameters are those of :func:`pose_covariance` (the valley is required here).
+
+    Returns
+    -------
+    cov, lobe : (K, 6, 6) float
+        Equal to ``pose_covariance(...)`` and ``reprojection_covariance(J, noise.sigma_px) +
+        valley_term(J, noise.sigma_px, delta_other, barrier_px2)``.
+    """
+    J = np.asarray(jacobian, dtype=np.float64)
+    info_inv = _information_inverse(J)
+    valley = _ValleyParts(J, delta_other, barrier_px2)
+    cov = _pose_covariance(info_inv, valley, R_cam_obj, t_cam_obj, extent_px, noise, view_angle_rad)
+    lobe = _scaled(info_inv, noise.sigma_px) + valley.term(noise.sigma_px)
+    return cov, lobe
+
+
+def _pose_covariance(
+    info_inv: FloatArray,
+    valley: _ValleyParts | None,
+    R_cam_obj: npt.ArrayLike,
+    t_cam_obj: npt.ArrayLike,
+    extent_px: npt.ArrayLike,
+    noise: NoiseModel,
+    view_angle_rad: npt.ArrayLike | None,
+) -> FloatArray:
+    """Steps 1-5 of :func:`pose_covariance` given ``(J^T J)^-1`` and the valley's parts."""
     R = np.asarray(R_cam_obj, dtype=np.float64)
     t = np.asarray(t_cam_obj, dtype=np.float64)
     k = len(R)
@@ -175,10 +233,10 @@ def pose_covariance(
     gain = 1.0 / np.maximum(np.cos(angle), 0.1) - 1.0
     # 1. pixel noise through the Jacobian
     sigma = noise.sigma_px * (1.0 + noise.view_angle_gain * gain)
-    cov = reprojection_covariance(jacobian, sigma)
+    cov = _scaled(info_inv, sigma)
     # 2. the valley towards the other branch
-    if delta_other is not None and barrier_px2 is not None:
-        cov += valley_term(jacobian, sigma, delta_other, barrier_px2)
+    if valley is not None:
+        cov += valley.term(sigma)
     # 3. second-order mixing of rotation and translation errors
     if noise.second_order:
         cov[:, :3, :3] += second_order_term(cov)
@@ -220,15 +278,27 @@ def valley_term(
     (K, 6, 6) float
     """
     J = np.asarray(jacobian, dtype=np.float64)
-    delta = np.asarray(delta_other, dtype=np.float64)
-    sigma2 = np.broadcast_to(np.asarray(sigma_px, dtype=np.float64), J.shape[:1]) ** 2
-    curvature_lin = np.einsum("kmi,ki->km", J, delta)
-    curvature_lin = np.einsum("km,km->k", curvature_lin, curvature_lin)
-    barrier = np.maximum(np.asarray(barrier_px2, dtype=np.float64), 1e-12)
-    with np.errstate(all="ignore"):
-        var_s = sigma2 / (4.0 * barrier) - sigma2 / curvature_lin
-    var_s = np.where(np.isfinite(var_s), np.clip(var_s, 0.0, 0.25), 0.0)
-    return np.asarray(var_s[:, None, None] * delta[:, :, None] * delta[:, None, :])
+    return _ValleyParts(J, delta_other, barrier_px2).term(sigma_px)
+
+
+class _ValleyParts:
+    """What :func:`valley_term` needs besides ``sigma``: computed once, used at two sigmas."""
+
+    __slots__ = ("barrier", "curvature_lin", "delta")
+
+    def __init__(self, J: FloatArray, delta_other: npt.ArrayLike, barrier_px2: npt.ArrayLike):
+        self.delta = np.asarray(delta_other, dtype=np.float64)
+        curvature_lin = np.einsum("kmi,ki->km", J, self.delta)
+        self.curvature_lin = np.einsum("km,km->k", curvature_lin, curvature_lin)
+        self.barrier = np.maximum(np.asarray(barrier_px2, dtype=np.float64), 1e-12)
+
+    def term(self, sigma_px: npt.ArrayLike) -> FloatArray:
+        delta = self.delta
+        sigma2 = np.broadcast_to(np.asarray(sigma_px, dtype=np.float64), delta.shape[:1]) ** 2
+        with np.errstate(all="ignore"):
+            var_s = sigma2 / (4.0 * self.barrier) - sigma2 / self.curvature_lin
+        var_s = np.where(np.isfinite(var_s), np.clip(var_s, 0.0, 0.25), 0.0)
+        return np.asarray(var_s[:, None, None] * delta[:, :, None] * delta[:, None, :])
 
 
 def ambiguity_weight(log_odds: npt.ArrayLike) -> FloatArray:

@@ -43,8 +43,7 @@ from tagloc.tags.covariance import (
     map_base_from_cam,
     map_cam_from_tag,
     pose_covariance,
-    reprojection_covariance,
-    valley_term,
+    pose_covariance_and_lobe,
 )
 from tagloc.tags.detection import TagDetection, tag_object_points
 from tagloc.tags.errors import TagError
@@ -241,37 +240,69 @@ class Refinement:
     stopped: BoolArray
 
 
+#: ``[v]x.reshape(9) = v @ _HAT_BASIS``: each entry is one component (or zero), exactly.
+_HAT_BASIS = np.array(
+    [
+        [0.0, 0.0, 0.0, 0.0, 0.0, -1.0, 0.0, 1.0, 0.0],
+        [0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0],
+        [0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    ]
+)
+_EYE3 = np.eye(3)
+
+
 def _hat(v: FloatArray) -> FloatArray:
-    out = np.zeros((*v.shape[:-1], 3, 3))
-    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
-    out[..., 1, 0], out[..., 2, 0], out[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
-    return out
+    """``[v]x`` of (..., 3) vectors, (..., 3, 3)."""
+    return np.asarray(v @ _HAT_BASIS).reshape(*v.shape[:-1], 3, 3)
 
 
 def _cayley(phi: FloatArray) -> FloatArray:
     """Rotations ``cay(phi)`` (K, 3, 3): ``Exp(phi)`` to first order, exactly orthonormal."""
-    A = _hat(0.5 * phi)
-    scale = 2.0 / (1.0 + np.einsum("ki,ki->k", 0.5 * phi, 0.5 * phi))
-    return np.asarray(np.eye(3) + scale[:, None, None] * (A + A @ A), dtype=np.float64)
+    half = 0.5 * phi
+    A = _hat(half)
+    scale = 2.0 / (1.0 + np.einsum("ki,ki->k", half, half))
+    return np.asarray(_EYE3 + scale[:, None, None] * (A + A @ A), dtype=np.float64)
 
 
 def _residuals(
-    camera: CameraModel, R: FloatArray, t: FloatArray, points_obj: FloatArray, pixels: FloatArray
+    camera: CameraModel,
+    R: FloatArray,
+    t: FloatArray,
+    points_obj: FloatArray,
+    pixels: FloatArray,
+    hat_obj: FloatArray | None = None,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Residuals ``(K, 2N)``, Jacobians ``(K, 2N, 6)`` and SSE ``(K,)`` (inf where invalid)."""
+    """Residuals ``(K, 2N)``, Jacobians ``(K, 2N, 6)`` and SSE ``(K,)`` (inf where invalid).
+
+    ``hat_obj`` is ``[p]x`` (K, N, 3, 3) of ``points_obj`` (computed if None).
+    """
     k, n = points_obj.shape[:2]
+    if hat_obj is None:
+        hat_obj = _hat(points_obj)
     points_cam = np.einsum("kij,knj->kni", R, points_obj) + t[:, None, :]
     px, J_px_p = camera.project_with_jacobian(points_cam.reshape(-1, 3))
     J_p_xi = np.empty((k, n, 3, 6))
     J_p_xi[..., :3] = R[:, None]
-    J_p_xi[..., 3:] = -np.einsum("kij,knjl->knil", R, _hat(points_obj))
+    J_p_xi[..., 3:] = -np.einsum("kij,knjl->knil", R, hat_obj)
     J = (J_px_p.reshape(k, n, 2, 3) @ J_p_xi).reshape(k, 2 * n, 6)
     r = (px.reshape(k, n, 2) - pixels).reshape(k, 2 * n)
     sse = np.einsum("ki,ki->k", r, r)
     bad = ~np.isfinite(sse)
-    sse[bad] = np.inf
-    r[bad], J[bad] = 0.0, 0.0
+    if bad.any():
+        sse[bad] = np.inf
+        r[bad], J[bad] = 0.0, 0.0
     return r, J, sse
+
+
+def _sse(
+    camera: CameraModel, R: FloatArray, t: FloatArray, points_obj: FloatArray, pixels: FloatArray
+) -> FloatArray:
+    """SSE ``(K,)`` of :func:`_residuals` without the Jacobian (inf where invalid)."""
+    points_cam = np.einsum("kij,knj->kni", R, points_obj) + t[:, None, :]
+    r = camera.project(points_cam.reshape(-1, 3)).reshape(pixels.shape) - pixels
+    sse = np.einsum("kni,kni->k", r, r)
+    sse[~np.isfinite(sse)] = np.inf
+    return np.asarray(sse)
 
 
 @np.errstate(all="ignore")  # NaN/inf mark invalid candidates on purpose
@@ -315,18 +346,23 @@ def refine_poses(
     n = points_obj.shape[-2]
     points = np.broadcast_to(points_obj, (k, n, 3))
     observed = np.broadcast_to(pixels, (k, n, 2))
-    R, t = np.array(R_cam_obj, dtype=np.float64), np.array(t_cam_obj, dtype=np.float64)
-    R_init, t_init = R.copy(), t.copy()
-    r, J, sse = _residuals(camera, R, t, points, observed)
-    J0, sse0 = J.copy(), sse.copy()
+    hat_obj = np.broadcast_to(_hat(points_obj), (k, n, 3, 3))
+    # arrays are replaced, never written: the initial ones stay as they were
+    R = R_init = np.array(R_cam_obj, dtype=np.float64)
+    t = t_init = np.array(t_cam_obj, dtype=np.float64)
+    r, J, sse = _residuals(camera, R, t, points, observed, hat_obj)
+    J0, sse0 = J, sse
     lam = np.full(k, 1e-3)
     done = np.zeros(k, dtype=bool)
     stopped = np.zeros(k, dtype=bool)
+    moved = True  # J, r changed since H, g were formed
     for _ in range(max_iterations):
-        H = np.swapaxes(J, 1, 2) @ J
-        g = np.einsum("kij,ki->kj", J, r)
-        diag = np.einsum("kii->ki", H)
-        A = H + (lam[:, None] * diag + 1e-12 * (1.0 + diag))[:, :, None] * _EYE6
+        if moved:
+            H = np.swapaxes(J, 1, 2) @ J
+            g = np.einsum("kij,ki->kj", J, r)
+            diag = np.einsum("kii->ki", H)
+            tiny = 1e-12 * (1.0 + diag)
+        A = H + (lam[:, None] * diag + tiny)[:, :, None] * _EYE6
         step = -np.linalg.solve(A, g[:, :, None])[:, :, 0]
         # Gauss-Newton's predicted decrease; negligible -> converged without another evaluation
         done |= ~stopped & (-np.einsum("ki,ki->k", g, step) <= 1e-8 * sse + 1e-12)
@@ -334,19 +370,23 @@ def refine_poses(
             break
         R_new = R @ _cayley(step[:, 3:])
         t_new = t + np.einsum("kij,kj->ki", R, step[:, :3])
-        r_new, J_new, sse_new = _residuals(camera, R_new, t_new, points, observed)
+        r_new, J_new, sse_new = _residuals(camera, R_new, t_new, points, observed, hat_obj)
         better = (sse_new < sse) & ~stopped
-        gain = np.where(better, sse - sse_new, 0.0)
-        R[better], t[better], r[better], J[better] = (
-            R_new[better],
-            t_new[better],
-            r_new[better],
-            J_new[better],
-        )
-        sse = np.where(better, sse_new, sse)
+        moved = bool(better.any())
+        if moved:
+            gain = np.where(better, sse - sse_new, 0.0)
+            if better.all():
+                R, t, r, J, sse = R_new, t_new, r_new, J_new, sse_new
+            else:
+                R = np.where(better[:, None, None], R_new, R)
+                t = np.where(better[:, None], t_new, t)
+                r = np.where(better[:, None], r_new, r)
+                J = np.where(better[:, None, None], J_new, J)
+                sse = np.where(better, sse_new, sse)
+            small = (gain <= 1e-7 * sse + 1e-12) | (np.abs(step).max(axis=1) < 1e-10)
+            done |= better & small
         lam = np.where(better, lam * 0.2, lam * 10.0)
-        converged = better & ((gain <= 1e-7 * sse + 1e-12) | (np.abs(step).max(axis=1) < 1e-10))
-        done = done | converged | (lam > 1e10) | ~np.isfinite(sse)
+        done |= (lam > 1e10) | ~np.isfinite(sse)
         if stop_early is not None:
             freeze, settle = stop_early(R, t, sse)
             stopped |= ~done & freeze
@@ -541,10 +581,8 @@ def _branch_covariances(
         delta.reshape(-1, 6),
         barrier.reshape(-1),
     )
-    cov = pose_covariance(J2, *args)
+    cov, lobe = pose_covariance_and_lobe(J2, *args)
     d = delta.reshape(-1, 6)
-    lobe = reprojection_covariance(J2, noise.sigma_px)
-    lobe += valley_term(J2, noise.sigma_px, d, barrier.reshape(-1))
     laplace = lobe[:, 3:, 3:]
     spread = np.einsum("ki,kij,kj->k", d, cov, d)
     with np.errstate(all="ignore"):
@@ -789,7 +827,7 @@ def estimate_joint_pose(
     starts = T_cam_tag @ T_tag_clu
     R_s, t_s = starts.rotation.matrix, starts.translation
     # refine two: the start that fits all corners best and the best one turned >= 5 deg from it
-    _, _, sse0 = _residuals(
+    sse0 = _sse(
         camera, R_s, t_s, np.repeat(points_clu, 2 * m, axis=0), np.repeat(pixels, 2 * m, axis=0)
     )
     first = int(np.argmin(sse0))
