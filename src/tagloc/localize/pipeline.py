@@ -153,6 +153,8 @@ class LocalizationPipeline:
         self._odom: list[SE3] = []
         self._published: list[SE3] = []
         self._covs: list[np.ndarray] = []
+        self._cov_last, self._cov_events, self._cov_stamp = _NAN6, -1, 0
+        self._cov_step_ns = round(self.config.process_noise.motion_step_s * S_NS)
         self._init: list[bool] = []
         self._truth: dict[int, SE3] = {}
         self._attempts: list[FixAttempt] = []
@@ -218,12 +220,19 @@ class LocalizationPipeline:
         return None
 
     def _record(self, stamp: int, T_odom_base: SE3) -> None:
+        """One row of the run. The covariance of ``T_map_base`` is recomputed when the filter
+        decided something or a motion step (0.1 s) passed, else the row repeats the last one
+        (it grows by the odometry random walk of < 0.1 s meanwhile)."""
         flt = self.filter
         self._stamps.append(stamp)
         self._odom.append(T_odom_base)
         if flt.initialized:
             self._published.append(flt.correction_at(stamp))
-            self._covs.append(flt.pose_at(stamp).cov)
+            n_events = len(flt.events)
+            if n_events != self._cov_events or stamp - self._cov_stamp >= self._cov_step_ns:
+                self._cov_last = flt.pose_at(stamp).cov
+                self._cov_events, self._cov_stamp = n_events, stamp
+            self._covs.append(self._cov_last)
         else:
             self._published.append(SE3.identity())
             self._covs.append(_NAN6)
