@@ -88,6 +88,20 @@ class SE3(LieGroup):
 
     # ----- constructors ----------------------------------------------------------------------
     @classmethod
+    def from_trusted(cls, rotation_matrix: npt.ArrayLike, translation: npt.ArrayLike) -> SE3:
+        """From ``(3, 3)`` / ``(N, 3, 3)`` rotations and translations that are valid by
+        construction (products of rotations, retractions in a solver's loop), unchecked.
+
+        For hot loops where validating small batches costs more than computing them; both
+        arrays are copied. Anything that is not a finite proper rotation with a matching
+        translation gives an SE3 that breaks the type's contract: use the checked constructors
+        for values from outside.
+        """
+        return cls._make(
+            np.array(rotation_matrix, dtype=np.float64), np.array(translation, dtype=np.float64)
+        )
+
+    @classmethod
     def identity(cls, n: int | None = None) -> SE3:
         """The identity, or a batch of ``n`` identities."""
         return cls._make(SO3.identity(n).matrix.copy(), np.zeros(3 if n is None else (n, 3)))

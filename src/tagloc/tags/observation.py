@@ -155,7 +155,8 @@ def _tag_prior(prior: PosePrior, T_map_tag: SE3 | None) -> OrientationPrior:
     """The prior of one tag: its map rotation and up axis if surveyed, else upright (``+y``)."""
     if T_map_tag is None:
         return prior.for_object(None, np.array([0.0, 1.0, 0.0]))
-    return prior.for_object(T_map_tag.rotation.matrix, T_map_tag.rotation.inverse().act(_E_Z))
+    R_map_tag = T_map_tag.rotation.matrix
+    return prior.for_object(R_map_tag, R_map_tag[2].copy())  # R_map_tag^T e_z
 
 
 def _tag_evidences(
@@ -203,7 +204,7 @@ def _decide_tag(
         chosen.cov_cam_tag_alt,
         decision.log_odds,
     )
-    return dataclasses.replace(chosen, cov_cam_tag=cov)
+    return chosen.with_covariance(cov)
 
 
 def _decide_joint(

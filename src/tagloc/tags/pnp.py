@@ -37,7 +37,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tagloc.camera import CameraModel
-from tagloc.geometry import SE3, SO3
+from tagloc.geometry import SE3
 from tagloc.tags.covariance import (
     NoiseModel,
     map_base_from_cam,
@@ -123,6 +123,24 @@ class TagPoseEstimate:
     def sse_alt_px2(self) -> float:
         """Sum of squared pixel residuals of ``T_cam_tag_alt``."""
         return 4.0 * self.reproj_err_alt_px**2
+
+    def with_covariance(self, cov_cam_tag: FloatArray) -> TagPoseEstimate:
+        """The same estimate with ``cov_cam_tag`` replaced (``dataclasses.replace``, faster)."""
+        return TagPoseEstimate(
+            self.tag_id,
+            self.size,
+            self.T_cam_tag,
+            self.T_cam_tag_alt,
+            self.reproj_err_px,
+            self.reproj_err_alt_px,
+            self.ambiguity_ratio,
+            cov_cam_tag,
+            self.cov_cam_tag_alt,
+            self.range_m,
+            self.view_angle_rad,
+            self.cov_rot_laplace,
+            self.cov_rot_laplace_alt,
+        )
 
     def swapped(self) -> TagPoseEstimate:
         """The same estimate with the alternative branch chosen (range, angle recomputed)."""
@@ -456,7 +474,8 @@ class Branches:
 
 
 def _as_se3(R: FloatArray, t: FloatArray) -> SE3:
-    return SE3(rotation=SO3.from_matrix(R), translation=t)
+    """The solver's rotations are orthonormal by construction (Cayley steps from IPPE's)."""
+    return SE3.from_trusted(R, t)
 
 
 def _pick_branches(
@@ -464,32 +483,41 @@ def _pick_branches(
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Best refined minimum and best *distinct* one; without one, the worst other start."""
     R, t = ref.R_cam_obj.reshape(k, c, 3, 3), ref.t_cam_obj.reshape(k, c, 3)
-    usable = valid & ~ref.stopped.reshape(k, c)
-    sse = np.where(usable, ref.sse_px2.reshape(k, c), np.inf)
-    raw_sse = np.where(valid, ref.sse_initial_px2.reshape(k, c), np.inf)
+    sse_initial = ref.sse_initial_px2.reshape(k, c)
+    sse = np.where(valid & ~ref.stopped.reshape(k, c), ref.sse_px2.reshape(k, c), np.inf)
     J = ref.jacobian.reshape(k, c, *ref.jacobian.shape[1:])
     rows = np.arange(k)
     first = np.argmin(sse, axis=1)
     cos_rel = (np.einsum("kij,kcij->kc", R[rows, first], R) - 1.0) / 2.0
-    far = np.linalg.norm(t - t[rows, first][:, None], axis=2)
-    distinct = (cos_rel < np.cos(_SAME_MINIMUM_RAD)) | (far > 1e-3 * np.linalg.norm(t, axis=2))
+    far = _norm(t - t[rows, first][:, None])
+    distinct = (cos_rel < np.cos(_SAME_MINIMUM_RAD)) | (far > 1e-3 * _norm(t))
     # within the best minimum, the start that was already best represents it
+    raw_sse = np.where(valid, sse_initial, np.inf)
     best = np.argmin(np.where(~distinct & np.isfinite(sse), raw_sse, np.inf), axis=1)
     alt = np.argmin(np.where(distinct, sse, np.inf), axis=1)
     has_alt = np.isfinite(sse[rows, alt]) & distinct[rows, alt]
-    other_raw = np.where(valid, ref.sse_initial_px2.reshape(k, c), -np.inf)
-    other_raw[rows, best] = -np.inf
-    raw = np.argmax(other_raw, axis=1)
-    pick = np.stack([best, alt], axis=1)
+    pick = np.empty((k, 2), dtype=np.intp)
+    pick[:, 0], pick[:, 1] = best, alt
     R_out, t_out = R[rows[:, None], pick], t[rows[:, None], pick]
     sse_out, J_out = sse[rows[:, None], pick], J[rows[:, None], pick]
+    if has_alt.all():
+        return R_out, t_out, sse_out, J_out
+    other_raw = np.where(valid, sse_initial, -np.inf)
+    other_raw[rows, best] = -np.inf
+    raw = np.argmax(other_raw, axis=1)
     fb = ~has_alt & np.isfinite(other_raw[rows, raw]) & np.isfinite(sse[rows, best])
-    R0, t0 = ref.R_initial.reshape(k, c, 3, 3), ref.t_initial.reshape(k, c, 3)
-    R_out[fb, 1], t_out[fb, 1] = R0[fb, raw[fb]], t0[fb, raw[fb]]
-    J_out[fb, 1] = ref.jacobian_initial.reshape(J.shape)[fb, raw[fb]]
-    sse_out[fb, 1] = other_raw[fb, raw[fb]]
+    if fb.any():
+        R0, t0 = ref.R_initial.reshape(k, c, 3, 3), ref.t_initial.reshape(k, c, 3)
+        R_out[fb, 1], t_out[fb, 1] = R0[fb, raw[fb]], t0[fb, raw[fb]]
+        J_out[fb, 1] = ref.jacobian_initial.reshape(J.shape)[fb, raw[fb]]
+        sse_out[fb, 1] = other_raw[fb, raw[fb]]
     sse_out[~has_alt & ~fb, 1] = np.inf
     return R_out, t_out, sse_out, J_out
+
+
+def _norm(v: FloatArray) -> FloatArray:
+    """``np.linalg.norm(v, axis=-1)`` (the same sum and root) without its overhead."""
+    return np.asarray(np.sqrt((v * v).sum(axis=-1)))
 
 
 def _pair_rule(R_start: FloatArray, settle_px2: float) -> StopRule:
@@ -551,8 +579,6 @@ def branch_valley(
 
 def _branch_covariances(
     camera: CameraModel,
-    T_best: SE3,
-    T_alt: SE3,
     R: FloatArray,
     t: FloatArray,
     J: FloatArray,
@@ -586,12 +612,12 @@ def _branch_covariances(
     laplace = lobe[:, 3:, 3:]
     spread = np.einsum("ki,kij,kj->k", d, cov, d)
     with np.errstate(all="ignore"):
-        s = np.nan_to_num(2.0 * np.sqrt(np.maximum(spread, 0.0)) / np.einsum("ki,ki->k", d, d))
-    s = np.minimum(s, 0.5)
+        s = 2.0 * np.sqrt(np.maximum(spread, 0.0)) / np.einsum("ki,ki->k", d, d)
+    s = np.where(np.isnan(s), 0.0, np.minimum(s, 0.5))  # nan_to_num, then at most 0.5
     # only where the shift turns the pose by more than ~2 deg does the information change
     rows = np.flatnonzero((s * np.linalg.norm(d[:, 3:], axis=1) > 0.03) & np.isfinite(spread))
     if len(rows):
-        T = SE3.stack([T_best, T_alt])[(rows % 2) * k + rows // 2]  # row 2i + b = branch b of i
+        T = SE3.from_trusted(R.reshape(-1, 3, 3)[rows], t.reshape(-1, 3)[rows])  # 2i + b: branch b
         shifted = T.plus(s[rows, None] * d[rows])
         _, J_shift, _ = _residuals(
             camera,
@@ -664,8 +690,6 @@ def solve_branches(
         angle = np.repeat(np.asarray(view_angle, dtype=np.float64)[:, None], 2, axis=1)
     cov, laplace = _branch_covariances(
         camera,
-        T_best,
-        T_alt,
         R,
         t,
         J.reshape(k, 2, 2 * n, 6),
@@ -819,7 +843,7 @@ def estimate_joint_pose(
     T_map_tag = SE3.stack(list(T_map_tags))
     sizes = np.array([e.size for e in estimates])
     points_map = T_map_tag.act(sizes[:, None, None] * tag_object_points(1.0)).reshape(-1, 3)
-    T_map_clu = SE3(rotation=SO3.identity(), translation=points_map.mean(axis=0))
+    T_map_clu = SE3.from_trusted(np.eye(3), points_map.mean(axis=0))
     points_clu = (points_map - T_map_clu.translation)[None]
     # starts: T_cam_clu = T_cam_tag @ T_tag_map @ T_map_clu for both branches of every tag
     T_cam_tag = SE3.stack([e.T_cam_tag for e in estimates] + [e.T_cam_tag_alt for e in estimates])
