@@ -1,7 +1,8 @@
 """Batched fast paths of the per-frame pipeline equal the per-tag computations they replace.
 
 Oracles: the plain per-call formulas (written out here, one rotation and one covariance at a
-time, as the module docstrings state them) and the per-tag calls of the public API.
+time, as the module docstrings state them), the per-tag calls of the public API, and the
+:class:`SE3` methods the geometry fast paths stand in for (bit for bit).
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import pytest
 from test_pnp import CAMERA, corners_of, wall_view
 
 from tagloc.geometry import SE3, SO3
+from tagloc.geometry.small_batch import se3_minus, se3_plus
 from tagloc.tags.covariance import NoiseModel
 from tagloc.tags.gates import OrientationPrior, tag_prior_evidence, tag_prior_evidences
 from tagloc.tags.pnp import TagPoseEstimate, estimate_tag_poses
@@ -120,3 +122,34 @@ def test_tag_prior_evidences_with_mixed_priors_fall_back_per_tag() -> None:
         assert got == tag_prior_evidence(prior, est)
     with pytest.raises(ValueError, match="2 priors for 3 estimates"):
         tag_prior_evidences(priors[:2], estimates)
+
+
+# ----- geometry fast paths the solver uses -------------------------------------------------------
+
+
+@pytest.mark.parametrize("scale", [0.0, 1e-9, 1e-3, 0.3, 1.2, 3.0])
+@pytest.mark.parametrize("n", [1, 4, 40])
+def test_small_batch_minus_and_plus_are_bit_identical_to_se3(scale: float, n: int) -> None:
+    rng = np.random.default_rng(int(1000 * scale) + n)
+    for _ in range(20):
+        T = SE3.random(rng, n, translation_scale=2.0)
+        tau = scale * rng.normal(size=(n, 6))
+        tau[0, 3:] = 0.0  # a pure translation among them
+        other = SE3.random(rng, n) if scale == 0.0 else T.plus(tau)
+        np.testing.assert_array_equal(se3_minus(other, T), other.minus(T))
+        fast, slow = se3_plus(T, tau), T.plus(tau)
+        np.testing.assert_array_equal(fast.rotation.matrix, slow.rotation.matrix)
+        np.testing.assert_array_equal(fast.translation, slow.translation)
+
+
+def test_from_trusted_equals_the_checked_constructor_and_owns_its_arrays() -> None:
+    rng = np.random.default_rng(8)
+    T = SE3.random(rng, 5)
+    R, t = T.rotation.matrix.copy(), T.translation.copy()
+    trusted = SE3.from_trusted(R, t)
+    assert trusted.allclose(SE3(rotation=SO3.from_matrix(R), translation=t), atol=0.0)
+    R[0] = 0.0  # the caller's arrays stay the caller's
+    assert trusted.allclose(T, atol=0.0)
+    assert not trusted.rotation.matrix.flags.writeable
+    single = SE3.from_trusted(T.rotation.matrix[2], T.translation[2])
+    assert not single.is_batch and single.allclose(T[2], atol=0.0)

@@ -38,6 +38,7 @@ import numpy.typing as npt
 
 from tagloc.camera import CameraModel
 from tagloc.geometry import SE3
+from tagloc.geometry.small_batch import se3_minus, se3_plus
 from tagloc.tags.covariance import (
     NoiseModel,
     map_base_from_cam,
@@ -473,6 +474,11 @@ class Branches:
     T_alt: SE3
 
 
+def _plus(T: SE3, tau: FloatArray) -> SE3:
+    """``T.plus(tau)`` (which raises on NaN / inf) through the small-batch fast path."""
+    return se3_plus(T, tau) if np.isfinite(tau).all() else T.plus(tau)
+
+
 def _as_se3(R: FloatArray, t: FloatArray) -> SE3:
     """The solver's rotations are orthonormal by construction (Cayley steps from IPPE's)."""
     return SE3.from_trusted(R, t)
@@ -568,8 +574,8 @@ def branch_valley(
     barrier : (K, 2) float
         SSE at the geodesic midpoint minus each branch's SSE (pixels^2).
     """
-    delta = T_alt.minus(T_best)
-    mid = T_best.plus(0.5 * delta)
+    delta = se3_minus(T_alt, T_best)
+    mid = _plus(T_best, 0.5 * delta)
     points_cam = mid.act(points_obj)
     r = camera.project(points_cam.reshape(-1, 3)).reshape(pixels.shape) - pixels
     sse_mid = np.einsum("kni,kni->k", r, r)
@@ -618,7 +624,7 @@ def _branch_covariances(
     rows = np.flatnonzero((s * np.linalg.norm(d[:, 3:], axis=1) > 0.03) & np.isfinite(spread))
     if len(rows):
         T = SE3.from_trusted(R.reshape(-1, 3, 3)[rows], t.reshape(-1, 3)[rows])  # 2i + b: branch b
-        shifted = T.plus(s[rows, None] * d[rows])
+        shifted = _plus(T, s[rows, None] * d[rows])
         _, J_shift, _ = _residuals(
             camera,
             shifted.rotation.matrix,
