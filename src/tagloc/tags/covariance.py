@@ -38,6 +38,9 @@ Plus the covariance of the derived ``T_map_cam`` / ``T_map_base`` (:func:`map_ca
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from dataclasses import dataclass
+
 import numpy as np
 import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict, Field
@@ -101,22 +104,52 @@ def reprojection_covariance(jacobian: npt.ArrayLike, sigma_px: npt.ArrayLike) ->
     -------
     (K, 6, 6) float
     """
-    J = np.asarray(jacobian, dtype=np.float64)
-    return _scaled(_information_inverse(J), sigma_px)
+    return _scaled(Linearization.of(jacobian).info_inv, sigma_px)
 
 
-def _information_inverse(J: FloatArray) -> FloatArray:
-    """``(J^T J)^-1`` of (K, M, 6) Jacobians (pseudo-inverse if one is singular)."""
-    info = np.swapaxes(J, 1, 2) @ J
-    with np.errstate(all="ignore"):
-        try:
-            return np.asarray(np.linalg.inv(info))
-        except np.linalg.LinAlgError:
-            return np.asarray(np.linalg.pinv(info, hermitian=True))
+@dataclass(frozen=True, slots=True)
+class Linearization:
+    """What the covariances take from reprojection Jacobians ``J`` (K, M, 6).
+
+    Problems of different ``M`` (a tag's 8 residuals, a joint estimate's 8 per tag) are
+    linearized separately and :meth:`stack` -ed, then share one pass of
+    :func:`linearized_pose_covariance` (every step after this one is per row).
+
+    Attributes
+    ----------
+    info_inv : (K, 6, 6) float
+        ``(J^T J)^-1`` (the pseudo-inverse for all K if one is singular).
+    curvature : (K,) float or None
+        ``|J delta|^2`` towards the other branch (the valley's linearized curvature).
+    """
+
+    info_inv: FloatArray
+    curvature: FloatArray | None = None
+
+    @classmethod
+    def of(cls, jacobian: npt.ArrayLike, delta_other: npt.ArrayLike | None = None) -> Linearization:
+        """Linearize ``J`` (K, M, 6), and along ``delta_other`` (K, 6) if given."""
+        J = np.asarray(jacobian, dtype=np.float64)
+        info = np.swapaxes(J, 1, 2) @ J
+        with np.errstate(all="ignore"):
+            try:
+                info_inv = np.asarray(np.linalg.inv(info))
+            except np.linalg.LinAlgError:
+                info_inv = np.asarray(np.linalg.pinv(info, hermitian=True))
+        return cls(info_inv, None if delta_other is None else _curvature(J, delta_other))
+
+    @classmethod
+    def stack(cls, items: Sequence[Linearization]) -> Linearization:
+        """One linearization of the rows of all ``items``, in order."""
+        info_inv = np.concatenate([item.info_inv for item in items])
+        curvatures = [item.curvature for item in items]
+        if any(c is None for c in curvatures):
+            return cls(info_inv)
+        return cls(info_inv, np.concatenate([c for c in curvatures if c is not None]))
 
 
 def _scaled(info_inv: FloatArray, sigma_px: npt.ArrayLike) -> FloatArray:
-    """``sigma^2 (J^T J)^-1``, symmetrized, from :func:`_information_inverse`."""
+    """``sigma^2 (J^T J)^-1``, symmetrized."""
     sigma = np.broadcast_to(np.asarray(sigma_px, dtype=np.float64), info_inv.shape[:1])
     return _sym(sigma[:, None, None] ** 2 * info_inv)
 
@@ -178,54 +211,27 @@ def pose_covariance(
         Right-tangent covariances, ``[x, y, z, rx, ry, rz]``; NaN where ``J`` holds NaN.
     """
     J = np.asarray(jacobian, dtype=np.float64)
-    valley = None
-    if delta_other is not None and barrier_px2 is not None:
-        valley = _ValleyParts(J, delta_other, barrier_px2)
-    info_inv = _information_inverse(J)
-    return _pose_covariance(
-        info_inv, valley, R_cam_obj, t_cam_obj, extent_px, noise, view_angle_rad
+    has_valley = delta_other is not None and barrier_px2 is not None
+    lin = Linearization.of(J, delta_other if has_valley else None)
+    return linearized_pose_covariance(
+        lin, R_cam_obj, t_cam_obj, extent_px, noise, view_angle_rad, delta_other, barrier_px2
     )
 
 
-def pose_covariance_and_lobe(
-    jacobian: npt.ArrayLike,
+def linearized_pose_covariance(
+    lin: Linearization,
     R_cam_obj: npt.ArrayLike,
     t_cam_obj: npt.ArrayLike,
     extent_px: npt.ArrayLike,
     noise: NoiseModel,
-    view_angle_rad: npt.ArrayLike,
-    delta_other: npt.ArrayLike,
-    barrier_px2: npt.ArrayLike,
-) -> tuple[FloatArray, FloatArray]:
-    """:func:`pose_covariance` and the likelihood lobe ``sigma_px^2 (J^T J)^-1`` plus
-    :func:`valley_term` (at ``sigma_px``, no other inflation) from one ``(J^T J)^-1``.
-
-    Parameters are those of :func:`pose_covariance` (the valley is required here).
-
-    Returns
-    -------
-    cov, lobe : (K, 6, 6) float
-        Equal to ``pose_covariance(...)`` and ``reprojection_covariance(J, noise.sigma_px) +
-        valley_term(J, noise.sigma_px, delta_other, barrier_px2)``.
-    """
-    J = np.asarray(jacobian, dtype=np.float64)
-    info_inv = _information_inverse(J)
-    valley = _ValleyParts(J, delta_other, barrier_px2)
-    cov = _pose_covariance(info_inv, valley, R_cam_obj, t_cam_obj, extent_px, noise, view_angle_rad)
-    lobe = _scaled(info_inv, noise.sigma_px) + valley.term(noise.sigma_px)
-    return cov, lobe
-
-
-def _pose_covariance(
-    info_inv: FloatArray,
-    valley: _ValleyParts | None,
-    R_cam_obj: npt.ArrayLike,
-    t_cam_obj: npt.ArrayLike,
-    extent_px: npt.ArrayLike,
-    noise: NoiseModel,
-    view_angle_rad: npt.ArrayLike | None,
+    view_angle_rad: npt.ArrayLike | None = None,
+    delta_other: npt.ArrayLike | None = None,
+    barrier_px2: npt.ArrayLike | None = None,
 ) -> FloatArray:
-    """Steps 1-5 of :func:`pose_covariance` given ``(J^T J)^-1`` and the valley's parts."""
+    """:func:`pose_covariance` from the Jacobians' :class:`Linearization` (the same numbers).
+
+    Parameters are those of :func:`pose_covariance`; the valley term needs ``lin.curvature``.
+    """
     R = np.asarray(R_cam_obj, dtype=np.float64)
     t = np.asarray(t_cam_obj, dtype=np.float64)
     k = len(R)
@@ -233,10 +239,11 @@ def _pose_covariance(
     gain = 1.0 / np.maximum(np.cos(angle), 0.1) - 1.0
     # 1. pixel noise through the Jacobian
     sigma = noise.sigma_px * (1.0 + noise.view_angle_gain * gain)
-    cov = _scaled(info_inv, sigma)
+    cov = _scaled(lin.info_inv, sigma)
     # 2. the valley towards the other branch
-    if valley is not None:
-        cov += valley.term(sigma)
+    if delta_other is not None and barrier_px2 is not None:
+        assert lin.curvature is not None, "the valley term needs Linearization.of(J, delta)"
+        cov += _valley(lin.curvature, sigma, delta_other, barrier_px2)
     # 3. second-order mixing of rotation and translation errors
     if noise.second_order:
         cov[:, :3, :3] += second_order_term(cov)
@@ -249,6 +256,20 @@ def _pose_covariance(
     # 5. floor
     floor = [noise.floor_translation_m**2] * 3 + [noise.floor_rotation_rad**2] * 3
     return _sym(cov + np.diag(floor))
+
+
+def laplace_covariance(
+    lin: Linearization, sigma_px: float, delta_other: npt.ArrayLike, barrier_px2: npt.ArrayLike
+) -> FloatArray:
+    """The likelihood lobe ``sigma^2 (J^T J)^-1`` plus :func:`valley_term` (no inflation).
+
+    Equal to ``reprojection_covariance(J, sigma_px) + valley_term(J, sigma_px, delta_other,
+    barrier_px2)`` for ``lin = Linearization.of(J, delta_other)``; (K, 6, 6).
+    """
+    assert lin.curvature is not None, "the valley term needs Linearization.of(J, delta)"
+    return _scaled(lin.info_inv, sigma_px) + _valley(
+        lin.curvature, sigma_px, delta_other, barrier_px2
+    )
 
 
 def valley_term(
@@ -278,27 +299,29 @@ def valley_term(
     (K, 6, 6) float
     """
     J = np.asarray(jacobian, dtype=np.float64)
-    return _ValleyParts(J, delta_other, barrier_px2).term(sigma_px)
+    return _valley(_curvature(J, delta_other), sigma_px, delta_other, barrier_px2)
 
 
-class _ValleyParts:
-    """What :func:`valley_term` needs besides ``sigma``: computed once, used at two sigmas."""
+def _curvature(J: FloatArray, delta_other: npt.ArrayLike) -> FloatArray:
+    """``|J delta|^2`` (K,): the linearized curvature of the cost along ``delta``."""
+    J_delta = np.einsum("kmi,ki->km", J, np.asarray(delta_other, dtype=np.float64))
+    return np.asarray(np.einsum("km,km->k", J_delta, J_delta))
 
-    __slots__ = ("barrier", "curvature_lin", "delta")
 
-    def __init__(self, J: FloatArray, delta_other: npt.ArrayLike, barrier_px2: npt.ArrayLike):
-        self.delta = np.asarray(delta_other, dtype=np.float64)
-        curvature_lin = np.einsum("kmi,ki->km", J, self.delta)
-        self.curvature_lin = np.einsum("km,km->k", curvature_lin, curvature_lin)
-        self.barrier = np.maximum(np.asarray(barrier_px2, dtype=np.float64), 1e-12)
-
-    def term(self, sigma_px: npt.ArrayLike) -> FloatArray:
-        delta = self.delta
-        sigma2 = np.broadcast_to(np.asarray(sigma_px, dtype=np.float64), delta.shape[:1]) ** 2
-        with np.errstate(all="ignore"):
-            var_s = sigma2 / (4.0 * self.barrier) - sigma2 / self.curvature_lin
-        var_s = np.where(np.isfinite(var_s), np.clip(var_s, 0.0, 0.25), 0.0)
-        return np.asarray(var_s[:, None, None] * delta[:, :, None] * delta[:, None, :])
+def _valley(
+    curvature_lin: FloatArray,
+    sigma_px: npt.ArrayLike,
+    delta_other: npt.ArrayLike,
+    barrier_px2: npt.ArrayLike,
+) -> FloatArray:
+    """:func:`valley_term` from the linearized curvature ``|J delta|^2`` (K,)."""
+    delta = np.asarray(delta_other, dtype=np.float64)
+    sigma2 = np.broadcast_to(np.asarray(sigma_px, dtype=np.float64), delta.shape[:1]) ** 2
+    barrier = np.maximum(np.asarray(barrier_px2, dtype=np.float64), 1e-12)
+    with np.errstate(all="ignore"):
+        var_s = sigma2 / (4.0 * barrier) - sigma2 / curvature_lin
+    var_s = np.where(np.isfinite(var_s), np.clip(var_s, 0.0, 0.25), 0.0)
+    return np.asarray(var_s[:, None, None] * delta[:, :, None] * delta[:, None, :])
 
 
 def ambiguity_weight(log_odds: npt.ArrayLike) -> FloatArray:
