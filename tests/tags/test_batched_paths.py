@@ -11,13 +11,27 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 import pytest
-from test_pnp import CAMERA, corners_of, wall_view
+from test_pnp import CAMERA, corners_of, level_camera, wall_tags, wall_view
 
 from tagloc.geometry import SE3, SO3
 from tagloc.geometry.small_batch import se3_minus, se3_plus
+from tagloc.tags import _frame
+from tagloc.tags._frame import estimate_frame
 from tagloc.tags.covariance import NoiseModel
-from tagloc.tags.gates import OrientationPrior, tag_prior_evidence, tag_prior_evidences
-from tagloc.tags.pnp import TagPoseEstimate, estimate_tag_poses
+from tagloc.tags.detection import TagDetection
+from tagloc.tags.gates import (
+    OrientationPrior,
+    RejectReason,
+    tag_prior_evidence,
+    tag_prior_evidences,
+)
+from tagloc.tags.observation import observe_tags
+from tagloc.tags.pnp import (
+    JointPoseEstimate,
+    TagPoseEstimate,
+    estimate_joint_pose,
+    estimate_tag_poses,
+)
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -153,3 +167,94 @@ def test_from_trusted_equals_the_checked_constructor_and_owns_its_arrays() -> No
     assert not trusted.rotation.matrix.flags.writeable
     single = SE3.from_trusted(T.rotation.matrix[2], T.translation[2])
     assert not single.is_batch and single.allclose(T[2], atol=0.0)
+
+
+# ----- one frame: tags and joint PnP finished together ------------------------------------------
+
+
+def _frame_detections(seed: int, n: int) -> tuple[list[tuple[TagDetection, float]], dict[int, SE3]]:
+    """``n`` upright tags on a wall 1-4 m in front of a level camera, noisy corners."""
+    rng = np.random.default_rng(seed)
+    T_map_cam = level_camera(0.0, 0.0, 1.2, 0.0)
+    xs = list(rng.uniform(-1.5, 1.5, n))
+    tag_poses = wall_tags(xs, list(rng.uniform(0.8, 1.6, n)))
+    tags = []
+    for tag_id, T_map_tag in tag_poses.items():
+        corners = corners_of(T_map_cam.inverse() @ T_map_tag) + rng.normal(0, 0.3, (4, 2))
+        tags.append((TagDetection(tag_id, "tag36h11", corners, 0, 60.0), 0.16))
+    return tags, tag_poses
+
+
+def _assert_same_estimate(a: TagPoseEstimate | None, b: TagPoseEstimate | None) -> None:
+    assert (a is None) == (b is None)
+    if a is None or b is None:
+        return
+    assert (a.tag_id, a.size, a.reproj_err_px, a.reproj_err_alt_px) == (
+        b.tag_id,
+        b.size,
+        b.reproj_err_px,
+        b.reproj_err_alt_px,
+    )
+    for name in ("T_cam_tag", "T_cam_tag_alt"):
+        assert getattr(a, name).allclose(getattr(b, name), atol=0.0)
+    for name in ("cov_cam_tag", "cov_cam_tag_alt", "cov_rot_laplace", "cov_rot_laplace_alt"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+
+
+def _assert_same_joint(a: JointPoseEstimate | None, b: JointPoseEstimate | None) -> None:
+    assert (a is None) == (b is None)
+    if a is None or b is None:
+        return
+    assert (a.tag_ids, a.reproj_err_px, a.reproj_err_alt_px) == (
+        b.tag_ids,
+        b.reproj_err_px,
+        b.reproj_err_alt_px,
+    )
+    assert a.T_map_cam.allclose(b.T_map_cam, atol=0.0)
+    assert a.T_map_cam_alt.allclose(b.T_map_cam_alt, atol=0.0)
+    for name in ("cov_map_cam", "cov_map_cam_alt", "cov_rot_laplace", "cov_rot_laplace_alt"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_estimate_frame_equals_tag_then_joint_pnp_bit_for_bit(seed: int) -> None:
+    n = 2 + seed % 4
+    tags, tag_poses = _frame_detections(seed, n)
+    noise = NoiseModel(sigma_px=0.3)
+    estimates, guess = estimate_frame(tags, CAMERA, noise, 2.0, tag_poses, None)
+    ids = [det.tag_id for det, _ in tags]
+    corners = np.array([det.corners_px for det, _ in tags])
+    reference = estimate_tag_poses(ids, corners, [0.16] * n, CAMERA, noise)
+    for got, want in zip(estimates, reference, strict=True):
+        _assert_same_estimate(got, want)
+    assert guess is not None and guess.rows == tuple(range(n))
+    joint = estimate_joint_pose(
+        [e for e in reference if e is not None], corners, list(tag_poses.values()), CAMERA, noise
+    )
+    _assert_same_joint(guess.estimate, joint)
+
+
+def test_observe_tags_recomputes_the_joint_when_a_tag_it_guessed_drops_out(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # the guess takes every tag whose refined error fits; a tag whose covariance then comes out
+    # non-finite has no estimate, so the joint estimate must be the one over the others
+    tags, tag_poses = _frame_detections(3, 4)
+    noise = NoiseModel(sigma_px=0.3)
+    real = _frame.tag_estimates
+
+    def drop_second(*args: object, **kwargs: object) -> list[TagPoseEstimate | None]:
+        out = real(*args, **kwargs)  # type: ignore[arg-type]
+        out[1] = None
+        return out
+
+    monkeypatch.setattr(_frame, "tag_estimates", drop_second)
+    result = observe_tags([det for det, _ in tags], CAMERA, 0.16, tag_poses=tag_poses, noise=noise)
+    assert result.counts()[RejectReason.DEGENERATE] == 1
+    kept = [0, 2, 3]
+    ids = [tags[i][0].tag_id for i in kept]
+    corners = np.array([tags[i][0].corners_px for i in kept])
+    estimates = [e for e in estimate_tag_poses(ids, corners, [0.16] * 3, CAMERA, noise) if e]
+    joint = estimate_joint_pose(estimates, corners, [tag_poses[i] for i in ids], CAMERA, noise)
+    assert result.joint is not None and result.joint.tag_ids == tuple(ids)
+    _assert_same_joint(result.joint, joint)  # no prior: the policy keeps the best branch

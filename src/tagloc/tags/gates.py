@@ -42,6 +42,7 @@ from tagloc.tags.prior import (
     OrientationPrior,
     PriorEvidence,
     prior_evidence,
+    prior_evidences,
     tag_prior_evidence,
     tag_prior_evidences,
 )
@@ -56,6 +57,7 @@ __all__ = [
     "check_detection",
     "check_estimate",
     "prior_evidence",
+    "prior_evidences",
     "resolve_ambiguity",
     "tag_prior_evidence",
     "tag_prior_evidences",

@@ -4,29 +4,31 @@ Steps (each rejection is a counted :class:`~tagloc.tags.gates.Rejection`, never 
 
 1. Unknown ids (no size, or not in the tag map) and decoder gates (hamming, decision margin).
 2. PnP for all remaining tags at once (:func:`~tagloc.tags.pnp.estimate_tag_poses`).
-3. Per tag: degenerate corners, reprojection, the ambiguity policy (data + prior), then range
-   and viewing angle on the chosen branch; the accepted covariance folds in the posterior
-   weight of the other branch (:func:`~tagloc.tags.covariance.ambiguity_mixture`).
+3. Per tag: degenerate corners, reprojection.
 4. With >= 2 tags of known map pose whose corners fit (ambiguous ones included: their corners
    are fine, only their single-tag pose is not): joint PnP (:func:`estimate_joint_pose`) for
-   ``T_map_cam`` (and ``T_map_base``), through the same reprojection gate and policy.
+   ``T_map_cam`` (and ``T_map_base``). Steps 2 and 4 share one pass for their covariances
+   (:mod:`tagloc.tags._frame`; the numbers are those of the two calls).
+5. The orientation prior on every tag that fits and on the joint estimate, in one pass.
+6. Per tag the ambiguity policy (data + prior), then range and viewing angle on the chosen
+   branch; the accepted covariance folds in the posterior weight of the other branch
+   (:func:`~tagloc.tags.covariance.ambiguity_mixture`). The joint estimate goes through the
+   same reprojection gate and policy.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import logging
 from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 import numpy.typing as npt
 
 from tagloc.camera import CameraModel
-from tagloc.errors import TaglocError
 from tagloc.geometry import SE3
+from tagloc.tags._frame import estimate_frame
 from tagloc.tags.covariance import NoiseModel, ambiguity_mixture, map_base_from_cam
 from tagloc.tags.detection import TagDetection
 from tagloc.tags.gates import (
@@ -37,19 +39,12 @@ from tagloc.tags.gates import (
     RejectReason,
     check_detection,
     check_estimate,
-    prior_evidence,
+    prior_evidences,
     resolve_ambiguity,
-    tag_prior_evidences,
 )
-from tagloc.tags.pnp import (
-    JointPoseEstimate,
-    TagPoseEstimate,
-    estimate_joint_pose,
-    estimate_tag_poses,
-)
+from tagloc.tags.pnp import JointPoseEstimate, TagPoseEstimate, estimate_joint_pose
 
 FloatArray = npt.NDArray[np.float64]
-_LOG = logging.getLogger(__name__)
 _E_Z = np.array([0.0, 0.0, 1.0])
 
 
@@ -129,28 +124,6 @@ def _size_of(tag_sizes: Mapping[int, float] | float, tag_id: int) -> float | Non
     return float(tag_sizes)
 
 
-def _safe_estimates(
-    tags: list[tuple[TagDetection, float]], camera: CameraModel, noise: NoiseModel
-) -> list[TagPoseEstimate | None]:
-    """Batched PnP; if the batch fails, one tag at a time so that one bad tag costs only itself."""
-    ids = [det.tag_id for det, _ in tags]
-    corners = np.array([det.corners_px for det, _ in tags]).reshape(-1, 4, 2)
-    sizes = [size for _, size in tags]
-    try:
-        return estimate_tag_poses(ids, corners, sizes, camera, noise)
-    except (TaglocError, ValueError, np.linalg.LinAlgError, cv2.error):
-        out: list[TagPoseEstimate | None] = []
-        for i in range(len(tags)):
-            try:
-                out += estimate_tag_poses(
-                    ids[i : i + 1], corners[i : i + 1], sizes[i : i + 1], camera, noise
-                )
-            except (TaglocError, ValueError, np.linalg.LinAlgError, cv2.error) as exc:
-                _LOG.debug("tag %d: no pose (%s)", ids[i], exc)
-                out.append(None)
-        return out
-
-
 def _tag_prior(prior: PosePrior, T_map_tag: SE3 | None) -> OrientationPrior:
     """The prior of one tag: its map rotation and up axis if surveyed, else upright (``+y``)."""
     if T_map_tag is None:
@@ -159,18 +132,38 @@ def _tag_prior(prior: PosePrior, T_map_tag: SE3 | None) -> OrientationPrior:
     return prior.for_object(R_map_tag, R_map_tag[2].copy())  # R_map_tag^T e_z
 
 
-def _tag_evidences(
+def _evidences(
     prior: PosePrior | None,
     tag_poses: Mapping[int, SE3] | None,
     estimates: Sequence[TagPoseEstimate],
-) -> list[PriorEvidence | None]:
-    """The prior's evidence on both branches of every estimate (one numpy pass for all)."""
+    joint: JointPoseEstimate | None,
+) -> tuple[list[PriorEvidence | None], PriorEvidence | None]:
+    """The prior's evidence on both branches of every estimate and of the joint one (whose
+    ``obj`` is the map), in one numpy pass."""
     if prior is None:
-        return [None] * len(estimates)
+        return [None] * len(estimates), None
     priors = [
         _tag_prior(prior, None if tag_poses is None else tag_poses[est.tag_id]) for est in estimates
     ]
-    return list(tag_prior_evidences(priors, estimates))
+    R_best = [e.T_cam_tag.rotation.matrix for e in estimates]
+    R_alt = [e.T_cam_tag_alt.rotation.matrix for e in estimates]
+    laplace_best = [e.cov_rot_laplace for e in estimates]
+    laplace_alt = [e.cov_rot_laplace_alt for e in estimates]
+    cov_best = [e.cov_cam_tag[3:, 3:] for e in estimates]
+    cov_alt = [e.cov_cam_tag_alt[3:, 3:] for e in estimates]
+    if joint is not None:
+        # R_cam_map's right tangent is -R_map_cam times T_map_cam's rotation tangent
+        R, R_j_alt = joint.T_map_cam.rotation.matrix, joint.T_map_cam_alt.rotation.matrix
+        priors.append(prior.for_object(np.eye(3), _E_Z))
+        R_best.append(R.T)
+        R_alt.append(R_j_alt.T)
+        laplace_best.append(joint.cov_rot_laplace)
+        laplace_alt.append(joint.cov_rot_laplace_alt)
+        cov_best.append(R @ joint.cov_map_cam[3:, 3:] @ R.T)
+        cov_alt.append(R_j_alt @ joint.cov_map_cam_alt[3:, 3:] @ R_j_alt.T)
+    evidence = prior_evidences(priors, R_best, R_alt, laplace_best, laplace_alt, cov_best, cov_alt)
+    tags: list[PriorEvidence | None] = list(evidence[: len(estimates)])
+    return tags, (evidence[-1] if joint is not None else None)
 
 
 def _decide_tag(
@@ -208,7 +201,11 @@ def _decide_tag(
 
 
 def _decide_joint(
-    joint: JointPoseEstimate, config: GateConfig, noise: NoiseModel, prior: PosePrior | None
+    joint: JointPoseEstimate,
+    config: GateConfig,
+    noise: NoiseModel,
+    evidence: PriorEvidence | None,
+    T_base_cam: SE3 | None,
 ) -> JointPoseEstimate | Rejection:
     """Reprojection gate and ambiguity policy of a joint estimate (``obj`` = the map)."""
     if not joint.reproj_err_px <= config.max_reproj_err_px:
@@ -219,19 +216,6 @@ def _decide_joint(
             f"(limit {config.max_reproj_err_px:.3g} px)",
             joint.reproj_err_px,
             config.max_reproj_err_px,
-        )
-    evidence = None
-    if prior is not None:
-        # R_cam_map's right tangent is -R_map_cam times T_map_cam's rotation tangent
-        R, R_alt = joint.T_map_cam.rotation.matrix, joint.T_map_cam_alt.rotation.matrix
-        evidence = prior_evidence(
-            prior.for_object(np.eye(3), _E_Z),
-            R.T,
-            R_alt.T,
-            joint.cov_rot_laplace,
-            joint.cov_rot_laplace_alt,
-            R @ joint.cov_map_cam[3:, 3:] @ R.T,
-            R_alt @ joint.cov_map_cam_alt[3:, 3:] @ R_alt.T,
         )
     decision = resolve_ambiguity(
         joint.sse_px2,
@@ -249,7 +233,13 @@ def _decide_joint(
             decision.log_odds,
             config.ambiguity_log_odds,
         )
-    return joint.swapped() if decision.choose_alt else joint
+    if not decision.choose_alt:
+        return joint
+    joint = joint.swapped()
+    if T_base_cam is None:
+        return joint
+    T_map_base, cov = map_base_from_cam(joint.T_map_cam, joint.cov_map_cam, T_base_cam)
+    return dataclasses.replace(joint, T_map_base=T_map_base, cov_map_base=cov)
 
 
 def observe_tags(
@@ -292,8 +282,96 @@ def observe_tags(
     """
     config = gate_config or GateConfig()
     noise = noise or NoiseModel()
-    rejections: list[Rejection] = []
     # 1. unknown ids, decoder gates
+    usable, rejections = _usable(detections, tag_sizes, tag_poses, config)
+    # 2. PnP, all tags at once (and the joint PnP over the tags step 4 will take)
+    estimates, guess = estimate_frame(
+        usable, camera, noise, config.max_reproj_err_px, tag_poses, T_base_cam
+    )
+    # 3. per tag: no pose, reprojection
+    fitted, outcomes = _fitting(usable, estimates, config)
+    # 4. joint PnP over the known tags that fit (an id seen twice is a mirror or a misread)
+    seen = Counter(est.tag_id for _, est in fitted)
+    known = [(i, est) for i, est in fitted if tag_poses is not None and seen[est.tag_id] == 1]
+    result: JointPoseEstimate | None = None
+    if tag_poses is not None and len(known) >= 2:
+        rows = tuple(i for i, _ in known)
+        if guess is not None and guess.rows == rows:  # step 2 guessed these tags
+            result = guess.estimate
+        else:
+            result = estimate_joint_pose(
+                [est for _, est in known],
+                np.array([usable[i][0].corners_px for i in rows]),
+                [tag_poses[est.tag_id] for _, est in known],
+                camera,
+                noise,
+                T_base_cam,
+            )
+    # 5. the prior on every tag that fits and on the joint estimate
+    evidences, joint_evidence = _evidences(prior, tag_poses, [est for _, est in fitted], result)
+    # 6. the policies: tags in detection order, then the joint estimate
+    accepted: list[TagPoseEstimate] = []
+    for outcome in outcomes:
+        decided: TagPoseEstimate | Rejection
+        if isinstance(outcome, int):
+            decided = _decide_tag(fitted[outcome][1], config, noise, evidences[outcome])
+        else:
+            decided = outcome
+        if isinstance(decided, Rejection):
+            rejections.append(decided)
+        else:
+            accepted.append(decided)
+    joint: JointPoseEstimate | None = None
+    if tag_poses is not None and len(known) >= 2:
+        if result is None:
+            rejections.append(Rejection(None, RejectReason.DEGENERATE, "joint PnP failed"))
+        else:
+            outcome_j = _decide_joint(result, config, noise, joint_evidence, T_base_cam)
+            if isinstance(outcome_j, Rejection):
+                rejections.append(outcome_j)
+            else:
+                joint = outcome_j
+    return ObservationResult(tuple(accepted), tuple(rejections), joint)
+
+
+def _fitting(
+    usable: Sequence[tuple[TagDetection, float]],
+    estimates: Sequence[TagPoseEstimate | None],
+    config: GateConfig,
+) -> tuple[list[tuple[int, TagPoseEstimate]], list[Rejection | int]]:
+    """Step 3 of :func:`observe_tags`: ``(index into usable, estimate)`` of the tags with a pose
+    that fits their corners, and per usable tag in order its rejection or its index into them."""
+    fitted: list[tuple[int, TagPoseEstimate]] = []
+    outcomes: list[Rejection | int] = []
+    for i, ((det, _), est) in enumerate(zip(usable, estimates, strict=True)):
+        if est is None:
+            outcomes.append(
+                Rejection(
+                    det.tag_id,
+                    RejectReason.DEGENERATE,
+                    "corners give no pose (outside the camera model, "
+                    "degenerate or behind the camera)",
+                )
+            )
+            continue
+        rejection = check_estimate(est, config)
+        if rejection is not None and rejection.reason is RejectReason.REPROJECTION:
+            outcomes.append(rejection)
+            continue
+        outcomes.append(len(fitted))
+        fitted.append((i, est))
+    return fitted, outcomes
+
+
+def _usable(
+    detections: Sequence[TagDetection],
+    tag_sizes: Mapping[int, float] | float,
+    tag_poses: Mapping[int, SE3] | None,
+    config: GateConfig,
+) -> tuple[list[tuple[TagDetection, float]], list[Rejection]]:
+    """Step 1 of :func:`observe_tags`: ``(detection, size)`` of the tags that pass, and the
+    rejections of the others (unknown ids, decoder gates)."""
+    rejections: list[Rejection] = []
     usable: list[tuple[TagDetection, float]] = []
     for det in detections:
         size = _size_of(tag_sizes, det.tag_id)
@@ -311,64 +389,4 @@ def observe_tags(
             rejections.append(rejection)
         else:
             usable.append((det, size))
-    # 2. PnP, all tags at once
-    estimates = _safe_estimates(usable, camera, noise) if usable else []
-    # 3. per tag: no pose, reprojection; then the policy (the prior on all tags in one pass)
-    fitted: list[tuple[TagPoseEstimate, TagDetection]] = []
-    outcomes: list[Rejection | int] = []  # in detection order: a rejection or a fitted index
-    for (det, _), est in zip(usable, estimates, strict=True):
-        if est is None:
-            outcomes.append(
-                Rejection(
-                    det.tag_id,
-                    RejectReason.DEGENERATE,
-                    "corners give no pose (outside the camera model, "
-                    "degenerate or behind the camera)",
-                )
-            )
-            continue
-        rejection = check_estimate(est, config)
-        if rejection is not None and rejection.reason is RejectReason.REPROJECTION:
-            outcomes.append(rejection)
-            continue
-        outcomes.append(len(fitted))
-        fitted.append((est, det))
-    evidences = _tag_evidences(prior, tag_poses, [est for est, _ in fitted])
-    accepted: list[TagPoseEstimate] = []
-    for outcome in outcomes:
-        decided: TagPoseEstimate | Rejection
-        if isinstance(outcome, int):
-            decided = _decide_tag(fitted[outcome][0], config, noise, evidences[outcome])
-        else:
-            decided = outcome
-        if isinstance(decided, Rejection):
-            rejections.append(decided)
-        else:
-            accepted.append(decided)
-    # 4. joint PnP over the known tags that fit (an id seen twice is a mirror or a misread)
-    joint: JointPoseEstimate | None = None
-    seen = Counter(est.tag_id for est, _ in fitted)
-    known = [(est, det) for est, det in fitted if tag_poses is not None and seen[est.tag_id] == 1]
-    if tag_poses is not None and len(known) >= 2:
-        result = estimate_joint_pose(
-            [est for est, _ in known],
-            np.array([det.corners_px for _, det in known]),
-            [tag_poses[est.tag_id] for est, _ in known],
-            camera,
-            noise,
-            T_base_cam,
-        )
-        if result is None:
-            rejections.append(Rejection(None, RejectReason.DEGENERATE, "joint PnP failed"))
-        else:
-            outcome_j = _decide_joint(result, config, noise, prior)
-            if isinstance(outcome_j, Rejection):
-                rejections.append(outcome_j)
-            else:
-                joint = outcome_j
-                if T_base_cam is not None and joint.T_map_base is None:  # the alternative won
-                    T_map_base, cov = map_base_from_cam(
-                        joint.T_map_cam, joint.cov_map_cam, T_base_cam
-                    )
-                    joint = dataclasses.replace(joint, T_map_base=T_map_base, cov_map_base=cov)
-    return ObservationResult(tuple(accepted), tuple(rejections), joint)
+    return usable, rejections

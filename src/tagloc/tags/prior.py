@@ -185,8 +185,7 @@ def tag_prior_evidence(prior: OrientationPrior, estimate: TagPoseEstimate) -> Pr
 def tag_prior_evidences(
     priors: Sequence[OrientationPrior], estimates: Sequence[TagPoseEstimate]
 ) -> list[PriorEvidence]:
-    """:func:`tag_prior_evidence` of each ``(prior, estimate)`` pair, in one numpy pass when the
-    priors differ only in ``R_cam_obj`` and ``up_obj`` (the tags of one frame).
+    """:func:`tag_prior_evidence` of each ``(prior, estimate)`` pair (:func:`prior_evidences`).
 
     Parameters
     ----------
@@ -198,23 +197,49 @@ def tag_prior_evidences(
     list of K PriorEvidence
         Equal to ``[tag_prior_evidence(p, e) for p, e in zip(priors, estimates)]``.
     """
-    k = len(estimates)
-    if k != len(priors):
-        raise ValueError(f"{len(priors)} priors for {k} estimates")
-    if k <= 1 or not all(_shared_with(p, priors[0]) for p in priors):
-        return [tag_prior_evidence(p, e) for p, e in zip(priors, estimates, strict=True)]
-    first = priors[0]
-    # rows: the best branch of every tag, then the alternative of every tag
-    R = np.array(
-        [e.T_cam_tag.rotation.matrix for e in estimates]
-        + [e.T_cam_tag_alt.rotation.matrix for e in estimates]
+    if len(estimates) != len(priors):
+        raise ValueError(f"{len(priors)} priors for {len(estimates)} estimates")
+    return prior_evidences(
+        priors,
+        [e.T_cam_tag.rotation.matrix for e in estimates],
+        [e.T_cam_tag_alt.rotation.matrix for e in estimates],
+        [e.cov_rot_laplace for e in estimates],
+        [e.cov_rot_laplace_alt for e in estimates],
+        [e.cov_cam_tag[3:, 3:] for e in estimates],
+        [e.cov_cam_tag_alt[3:, 3:] for e in estimates],
     )
+
+
+def prior_evidences(
+    priors: Sequence[OrientationPrior],
+    R_best: Sequence[npt.ArrayLike],
+    R_alt: Sequence[npt.ArrayLike],
+    laplace_best: Sequence[npt.ArrayLike],
+    laplace_alt: Sequence[npt.ArrayLike],
+    cov_rot_best: Sequence[npt.ArrayLike],
+    cov_rot_alt: Sequence[npt.ArrayLike],
+) -> list[PriorEvidence]:
+    """:func:`prior_evidence` of ``K`` estimates (one item of each sequence per estimate), in
+    one numpy pass when the priors differ only in ``R_cam_obj`` and ``up_obj`` (the tags of a
+    frame and its joint estimate); equal to the ``K`` calls.
+
+    Raises
+    ------
+    ValueError
+        If the sequences differ in length.
+    """
+    k = len(priors)
+    columns = (R_best, R_alt, laplace_best, laplace_alt, cov_rot_best, cov_rot_alt)
+    if any(len(column) != k for column in columns):
+        raise ValueError(f"{k} priors for {[len(c) for c in columns]} estimates")
+    if k <= 1 or not all(_shared_with(p, priors[0]) for p in priors):
+        return [prior_evidence(p, *row) for p, *row in zip(priors, *columns, strict=True)]
+    first = priors[0]
+    # rows: the best branch of every estimate, then the alternative of every one
+    R = np.array(list(R_best) + list(R_alt), dtype=np.float64)
     C = np.array(
-        [
-            [e.cov_rot_laplace for e in estimates] + [e.cov_rot_laplace_alt for e in estimates],
-            [e.cov_cam_tag[3:, 3:] for e in estimates]
-            + [e.cov_cam_tag_alt[3:, 3:] for e in estimates],
-        ]
+        [list(laplace_best) + list(laplace_alt), list(cov_rot_best) + list(cov_rot_alt)],
+        dtype=np.float64,
     )
     R_prior = None
     if first.R_cam_obj is not None:
