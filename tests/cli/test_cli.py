@@ -3,33 +3,20 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
 
+from cli_runner import run_tagloc
 from tagloc.sim import load_default_world, load_world
 from tagloc.tags.tagmap import load_tag_map
 
 
-def _tagloc(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-c", "from tagloc.cli import main; main()", *args],
-        capture_output=True,
-        text=True,
-        cwd=cwd,
-        env={"MPLBACKEND": "Agg", "PATH": ""},
-        check=False,
-        timeout=300,
-    )
-
-
 def test_demo_surveys_localizes_and_writes_the_reports(tmp_path: Path) -> None:
     out = tmp_path / "out"
-    result = _tagloc("demo", "--out", str(out), "--duration", "60")
+    result = run_tagloc("demo", "--out", str(out), "--duration", "60")
     assert result.returncode == 0, result.stderr
     png = (out / "drive.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 50_000
@@ -53,7 +40,7 @@ def test_demo_surveys_localizes_and_writes_the_reports(tmp_path: Path) -> None:
 
 def test_demo_quick_skips_the_survey(tmp_path: Path) -> None:
     out = tmp_path / "out"
-    result = _tagloc("demo", "--out", str(out), "--duration", "20", "--quick")
+    result = run_tagloc("demo", "--out", str(out), "--duration", "20", "--quick")
     assert result.returncode == 0, result.stderr
     assert "survey:" not in result.stdout
     assert sorted(p.name for p in out.iterdir()) == ["drive.png", "localize_true_map", "world.yaml"]
@@ -87,7 +74,7 @@ def _write_world_with(tmp_path: Path, edit: str) -> Path:
 def test_bad_world_is_one_line_naming_file_and_field(tmp_path: Path, edit: str, field: str) -> None:
     path = _write_world_with(tmp_path, edit)
     out = tmp_path / "out"
-    result = _tagloc("demo", "--world", str(path), "--out", str(out))
+    result = run_tagloc("demo", "--world", str(path), "--out", str(out))
     assert result.returncode == 1
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1, result.stderr
@@ -99,7 +86,7 @@ def test_world_check_accepts_the_default_world() -> None:
     import tagloc.sim
 
     path = Path(tagloc.sim.__file__).parent / "worlds" / "office.yaml"
-    result = _tagloc("world", "check", str(path))
+    result = run_tagloc("world", "check", str(path))
     assert result.returncode == 0, result.stderr
     assert "37 tags" in result.stdout
 

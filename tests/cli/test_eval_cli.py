@@ -4,26 +4,15 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from cli_runner import run_tagloc
 from tagloc.eval.compare import compare_trajectories
 from tagloc.geometry import SE3
 from tagloc.io import read_tum, write_tum
-
-
-def _tagloc(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-c", "from tagloc.cli import main; main()", *args],
-        capture_output=True,
-        text=True,
-        env={"MPLBACKEND": "Agg", "PATH": "", "COLUMNS": "200"},
-        check=False,
-        timeout=300,
-    )
 
 
 def _one_error_line(done: subprocess.CompletedProcess[str]) -> str:
@@ -34,7 +23,7 @@ def _one_error_line(done: subprocess.CompletedProcess[str]) -> str:
 
 
 def test_eval_run_writes_the_report(tmp_path: Path) -> None:
-    done = _tagloc("eval", "run", "--scenario", "default", "--duration", "12", "--out",
+    done = run_tagloc("eval", "run", "--scenario", "default", "--duration", "12", "--out",
                    str(tmp_path))  # fmt: skip
     assert done.returncode == 0, done.stderr
     assert "fused ATE RMSE" in done.stdout and "baseline" in done.stdout
@@ -54,7 +43,7 @@ def test_eval_files_matches_the_pure_function(tmp_path: Path) -> None:
     est = truth @ SE3.exp(rng.normal(0.0, 0.01, (n, 6)))
     write_tum(tmp_path / "truth.tum", stamps_ns, truth)
     write_tum(tmp_path / "est.tum", stamps_ns, est)
-    done = _tagloc("eval", "files", "--truth", str(tmp_path / "truth.tum"), "--est",
+    done = run_tagloc("eval", "files", "--truth", str(tmp_path / "truth.tum"), "--est",
                    str(tmp_path / "est.tum"))  # fmt: skip
     assert done.returncode == 0, done.stderr
     expected = compare_trajectories(
@@ -68,15 +57,15 @@ def test_eval_files_matches_the_pure_function(tmp_path: Path) -> None:
 
 def test_errors_are_one_line(tmp_path: Path) -> None:
     assert "unknown scenario" in _one_error_line(
-        _tagloc("eval", "run", "--scenario", "no_such_scenario", "--out", str(tmp_path))
+        run_tagloc("eval", "run", "--scenario", "no_such_scenario", "--out", str(tmp_path))
     )
     missing = tmp_path / "missing.tum"
     assert "missing.tum" in _one_error_line(
-        _tagloc("eval", "files", "--truth", str(missing), "--est", str(missing))
+        run_tagloc("eval", "files", "--truth", str(missing), "--est", str(missing))
     )
     (tmp_path / "a.tum").write_text("0.0 0 0 0 0 0 0 1\n")
     far = tmp_path / "b.tum"
     write_tum(far, np.array([5_000_000_000, 6_000_000_000]), SE3.identity(2))
-    line = _one_error_line(_tagloc("eval", "files", "--truth", str(tmp_path / "a.tum"),
+    line = _one_error_line(run_tagloc("eval", "files", "--truth", str(tmp_path / "a.tum"),
                                    "--est", str(far)))  # fmt: skip
     assert "associate" in line or "poses" in line

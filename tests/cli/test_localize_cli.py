@@ -3,28 +3,16 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from cli_runner import run_tagloc
 from tagloc.cli.localize_cmd import write_stream_bag
 from tagloc.io import BagSource, read_tum
 from tagloc.sim.scenarios import ScenarioSource, build_scenario
 from tagloc.tags import save_tag_map
-
-
-def _tagloc(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-c", "from tagloc.cli import main; main()", *args],
-        capture_output=True,
-        text=True,
-        env={"MPLBACKEND": "Agg", "PATH": ""},
-        check=False,
-        timeout=300,
-    )
 
 
 @pytest.fixture(scope="module")
@@ -39,7 +27,7 @@ def drive_bag(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
 
 def test_scenario_writes_tum_events_and_a_bag(tmp_path: Path) -> None:
     out = tmp_path / "out"
-    result = _tagloc("localize", "--scenario", "default", "--duration", "15", "--out", str(out))
+    result = run_tagloc("localize", "--scenario", "default", "--duration", "15", "--out", str(out))
     assert result.returncode == 0, result.stderr
     names = {p.name for p in out.iterdir()}
     assert {"fused.tum", "odometry.tum", "truth.tum", "events.jsonl", "fixes.jsonl"} <= names
@@ -62,7 +50,7 @@ def test_bag_input_localizes_like_the_scenario(
 ) -> None:
     path, tags = drive_bag
     out = tmp_path / "out"
-    result = _tagloc("localize", str(path), "--tags", str(tags), "--out", str(out), "--no-bag")
+    result = run_tagloc("localize", str(path), "--tags", str(tags), "--out", str(out), "--no-bag")
     assert result.returncode == 0, result.stderr
     _, T_fused = read_tum(out / "fused.tum")
     _, T_truth = read_tum(out / "truth.tum")
@@ -88,7 +76,7 @@ def test_bad_input_is_one_line_and_writes_nothing(
     path, tags = drive_bag
     real = [str(path) if a == "BAG" else str(tags) if a == "TAGS" else a for a in args]
     out = tmp_path / "out"
-    result = _tagloc("localize", *real, "--out", str(out))
+    result = run_tagloc("localize", *real, "--out", str(out))
     assert result.returncode == 1, result.stdout
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and message in lines[0], result.stderr

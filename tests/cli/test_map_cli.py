@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
 
+from cli_runner import run_tagloc
 from tagloc.cli.map_cmd import map_app
 from tagloc.tags.tagmap import TagMapError
 
@@ -36,25 +35,7 @@ DIFF_LINES = [  # sorted by (family, id)
     '~ tag36h11:3 note "" -> "back wall"',
     "~ tag36h11:17 moved 3.0 cm [+3.0, +0.0, +0.0] cm in map, rotated 0.0 deg",
 ]
-# ``tagloc`` with the map sub-app added if app.py does not register it (yet)
-_SCRIPT = (
-    "from tagloc.cli import app, main\n"
-    "from tagloc.cli.map_cmd import map_app\n"
-    "if not any(g.typer_instance is map_app for g in app.registered_groups):\n"
-    "    app.add_typer(map_app, name='map')\n"
-    "main()\n"
-)
 
-
-def _tagloc(*args: str, script: str = _SCRIPT) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-c", script, *args],
-        capture_output=True,
-        text=True,
-        env={"PATH": ""},
-        check=False,
-        timeout=120,
-    )
 
 
 @pytest.fixture
@@ -68,7 +49,7 @@ def maps(tmp_path: Path) -> tuple[Path, Path, Path]:
 
 def test_check_prints_a_one_line_summary(maps: tuple[Path, Path, Path]) -> None:
     good, _, _ = maps
-    result = _tagloc("map", "check", str(good))
+    result = run_tagloc("map", "check", str(good))
     assert result.returncode == 0, result.stderr
     assert result.stdout == f"{good}: ok: {SUMMARY}\n"
 
@@ -77,11 +58,11 @@ def test_check_of_a_bad_map_is_one_line_naming_file_entry_and_field(
     maps: tuple[Path, Path, Path],
 ) -> None:
     _, _, bad = maps
-    result = _tagloc("map", "check", str(bad))
+    result = run_tagloc("map", "check", str(bad))
     assert result.returncode == 1
     assert result.stdout == ""
     assert result.stderr == f"tagloc: error: {bad}: tags[2] (id 3): size: must be > 0\n"
-    missing = _tagloc("map", "check", str(bad.parent / "missing.yaml"))
+    missing = run_tagloc("map", "check", str(bad.parent / "missing.yaml"))
     assert missing.returncode == 1 and "cannot read tag map" in missing.stderr
     assert len(missing.stderr.splitlines()) == 1
 
@@ -90,16 +71,16 @@ def test_diff_prints_changes_and_exits_0_or_1_with_exit_code(
     maps: tuple[Path, Path, Path],
 ) -> None:
     good, new, bad = maps
-    result = _tagloc("map", "diff", str(good), str(new))
+    result = run_tagloc("map", "diff", str(good), str(new))
     assert result.returncode == 0, result.stderr
     assert result.stdout.splitlines() == DIFF_LINES
-    assert _tagloc("map", "diff", "--exit-code", str(good), str(new)).returncode == 1
-    same = _tagloc("map", "diff", "--exit-code", str(good), str(good))
+    assert run_tagloc("map", "diff", "--exit-code", str(good), str(new)).returncode == 1
+    same = run_tagloc("map", "diff", "--exit-code", str(good), str(good))
     assert same.returncode == 0 and same.stdout == f"no differences: {good} {good}\n"
     # a larger threshold hides the 3 cm move
-    result = _tagloc("map", "diff", "--min-move-cm", "5", str(good), str(new))
+    result = run_tagloc("map", "diff", "--min-move-cm", "5", str(good), str(new))
     assert result.stdout.splitlines() == [DIFF_LINES[0], DIFF_LINES[1]]
-    broken = _tagloc("map", "diff", str(good), str(bad))
+    broken = run_tagloc("map", "diff", str(good), str(bad))
     assert broken.returncode == 1 and broken.stderr.startswith(f"tagloc: error: {bad}: tags[2]")
 
 
@@ -109,7 +90,7 @@ def test_map_is_wired_into_the_tagloc_command(maps: tuple[Path, Path, Path]) -> 
     if not any(g.typer_instance is map_app for g in app.registered_groups):
         pytest.skip("map_app is not yet added to tagloc.cli.app (app.add_typer(map_app, 'map'))")
     good, _, _ = maps
-    result = _tagloc("map", "check", str(good), script="from tagloc.cli import main; main()")
+    result = run_tagloc("map", "check", str(good))
     assert result.returncode == 0 and SUMMARY in result.stdout
 
 

@@ -2,29 +2,20 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from cli_runner import run_tagloc
 from tagloc.io import BagSource, read_tum
 from tagloc.tags import load_tag_map
-
-
-def _tagloc(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-c", "from tagloc.cli import main; main()", *args],
-        capture_output=True, text=True, env={"MPLBACKEND": "Agg", "PATH": ""}, check=False,
-        timeout=300,
-    )  # fmt: skip
 
 
 @pytest.mark.parametrize("name", ["drive.bag", "drive.mcap"])
 def test_recorded_drive_is_a_bag_with_truth_that_localizes(tmp_path: Path, name: str) -> None:
     bag = tmp_path / name
-    result = _tagloc("sim", "record", "--out", str(bag), "--duration", "12", "--seed", "3")
+    result = run_tagloc("sim", "record", "--out", str(bag), "--duration", "12", "--seed", "3")
     assert result.returncode == 0, result.stderr
     assert load_tag_map(tmp_path / "tags.yaml").ids()
     source = BagSource(bag)
@@ -32,7 +23,7 @@ def test_recorded_drive_is_a_bag_with_truth_that_localizes(tmp_path: Path, name:
         source.bag_topics
     )
     out = tmp_path / "loc"
-    result = _tagloc("localize", str(bag), "--tags", str(tmp_path / "tags.yaml"), "--out",
+    result = run_tagloc("localize", str(bag), "--tags", str(tmp_path / "tags.yaml"), "--out",
                      str(out), "--no-bag")  # fmt: skip
     assert result.returncode == 0, result.stderr
     _, T_fused = read_tum(out / "fused.tum")
@@ -45,7 +36,7 @@ def test_recorded_drive_is_a_bag_with_truth_that_localizes(tmp_path: Path, name:
 def test_bad_format_and_scenario_are_one_line(tmp_path: Path) -> None:
     for args, words in ((("--format", "zip"), "--format 'zip'"),
                         (("--scenario", "volcano"), "unknown scenario")):  # fmt: skip
-        result = _tagloc("sim", "record", "--out", str(tmp_path / "x.mcap"), *args)
+        result = run_tagloc("sim", "record", "--out", str(tmp_path / "x.mcap"), *args)
         assert result.returncode == 1
         lines = result.stderr.strip().splitlines()
         assert len(lines) == 1 and words in lines[0], result.stderr

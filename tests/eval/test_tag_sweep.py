@@ -12,14 +12,13 @@ import dataclasses
 import io
 import itertools
 import math
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 from pydantic import ValidationError
 
+from cli_runner import run_tagloc
 from tagloc.eval.tag_sweep import TagSweepResult, is_ambiguity_flip, run_tag_sweep
 from tagloc.eval.tag_sweep_config import (
     TagSweepConfig,
@@ -247,19 +246,9 @@ def test_config_validates_names_the_field_and_round_trips(tmp_path: Path) -> Non
 # ----- the command -----------------------------------------------------------------------------
 
 
-def _tagloc(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-c", "from tagloc.cli import main; main()", *args],
-        capture_output=True,
-        text=True,
-        env={"MPLBACKEND": "Agg", "PATH": "", "COLUMNS": "200"},
-        check=False,
-        timeout=300,
-    )
-
 
 def test_cli_quick_writes_every_file(tmp_path: Path) -> None:
-    done = _tagloc("eval", "tags", "--quick", "--seed", "2", "--out", str(tmp_path))
+    done = run_tagloc("eval", "tags", "--quick", "--seed", "2", "--out", str(tmp_path))
     assert done.returncode == 0, done.stderr
     assert "checks" in done.stdout and "position error median at 2 m" in done.stdout
     assert {p.name for p in tmp_path.iterdir()} == set(SWEEP_FILES)
@@ -277,7 +266,7 @@ def test_cli_bad_input_is_one_error_line(tmp_path: Path) -> None:
         (("--quick", "--backend", "nope"), "unknown detector backend 'nope'"),
         (("--quick", "--trials", "0"), "trials: input should be greater than or equal to 1"),
     ]:
-        done = _tagloc("eval", "tags", *args, "--out", str(tmp_path / "out"))
+        done = run_tagloc("eval", "tags", *args, "--out", str(tmp_path / "out"))
         assert done.returncode == 1, done.stderr
         lines = done.stderr.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("tagloc: error: "), done.stderr
