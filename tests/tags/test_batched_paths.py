@@ -14,7 +14,7 @@ import pytest
 from test_pnp import CAMERA, corners_of, level_camera, wall_tags, wall_view
 
 from tagloc.geometry import SE3, SO3
-from tagloc.geometry.small_batch import se3_minus, se3_plus
+from tagloc.geometry.small_batch import row_norms, se3_minus, se3_plus
 from tagloc.tags import _frame
 from tagloc.tags._frame import estimate_frame
 from tagloc.tags.covariance import NoiseModel
@@ -154,6 +154,12 @@ def test_small_batch_minus_and_plus_are_bit_identical_to_se3(scale: float, n: in
         fast, slow = se3_plus(T, tau), T.plus(tau)
         np.testing.assert_array_equal(fast.rotation.matrix, slow.rotation.matrix)
         np.testing.assert_array_equal(fast.translation, slow.translation)
+
+
+@pytest.mark.parametrize("shape", [(3,), (7, 3), (4, 2, 3), (5, 2)])
+def test_row_norms_are_numpys_norms_bit_for_bit(shape: tuple[int, ...]) -> None:
+    v = np.random.default_rng(len(shape)).normal(size=shape) * 10.0 ** np.arange(shape[-1])
+    np.testing.assert_array_equal(row_norms(v), np.linalg.norm(v, axis=-1))
 
 
 def test_from_trusted_equals_the_checked_constructor_and_owns_its_arrays() -> None:

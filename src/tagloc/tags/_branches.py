@@ -18,7 +18,7 @@ import numpy.typing as npt
 
 from tagloc.camera import CameraModel
 from tagloc.geometry import SE3
-from tagloc.geometry.small_batch import se3_minus, se3_plus
+from tagloc.geometry.small_batch import row_norms, se3_minus, se3_plus
 from tagloc.tags._refine import Refinement, StopRule, _residuals, refine_poses
 from tagloc.tags.covariance import (
     Linearization,
@@ -39,7 +39,7 @@ _SETTLE_CHI2 = 75.0
 
 def _range_and_view_angle(R: FloatArray, t: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Range ``|t|`` and the angle between the tag normal ``R[:, 2]`` and the ray ``-t``."""
-    range_m = np.linalg.norm(t, axis=-1)
+    range_m = row_norms(t)
     with np.errstate(all="ignore"):
         cos_angle = -np.einsum("...i,...i->...", R[..., :, 2], t) / range_m
     return range_m, np.arccos(np.clip(cos_angle, -1.0, 1.0))
@@ -92,8 +92,8 @@ def _pick_branches(
     rows = np.arange(k)
     first = np.argmin(sse, axis=1)
     cos_rel = (np.einsum("kij,kcij->kc", R[rows, first], R) - 1.0) / 2.0
-    far = _norm(t - t[rows, first][:, None])
-    distinct = (cos_rel < np.cos(_SAME_MINIMUM_RAD)) | (far > 1e-3 * _norm(t))
+    far = row_norms(t - t[rows, first][:, None])
+    distinct = (cos_rel < np.cos(_SAME_MINIMUM_RAD)) | (far > 1e-3 * row_norms(t))
     # within the best minimum, the start that was already best represents it
     raw_sse = np.where(valid, sse_initial, np.inf)
     best = np.argmin(np.where(~distinct & np.isfinite(sse), raw_sse, np.inf), axis=1)
@@ -118,11 +118,6 @@ def _pick_branches(
     return R_out, t_out, sse_out, J_out
 
 
-def _norm(v: FloatArray) -> FloatArray:
-    """``np.linalg.norm(v, axis=-1)`` (the same sum and root) without its overhead."""
-    return np.asarray(np.sqrt((v * v).sum(axis=-1)))
-
-
 def _pair_rule(R_start: FloatArray, settle_px2: float) -> StopRule:
     """``stop_early`` for pairs of starts ``(K, 2, 3, 3)`` (the two IPPE branches of a tag, or
     the two joint starts). Freeze a candidate that came within 35 % of the starting angle to
@@ -131,15 +126,21 @@ def _pair_rule(R_start: FloatArray, settle_px2: float) -> StopRule:
     other = R_start[:, ::-1].reshape(-1, 3, 3)
     start_cos = np.einsum("kij,kij->k", R_start.reshape(-1, 3, 3), other)
     start_angle = np.arccos(np.clip((start_cos - 1.0) / 2.0, -1.0, 1.0))
+    limit, apart = 0.35 * start_angle, start_angle > 0.05
+    watch = bool(apart.any())  # pairs that start together never freeze
+    never = np.zeros(len(start_angle), dtype=bool)
     calls = [0]
 
     def rule(R: FloatArray, t: FloatArray, sse: FloatArray) -> tuple[BoolArray, BoolArray]:
         calls[0] += 1
-        angle = np.arccos(np.clip((np.einsum("kij,kij->k", R, other) - 1.0) / 2.0, -1.0, 1.0))
-        freeze = (angle < 0.35 * start_angle) & (start_angle > 0.05)
+        freeze = never
+        if watch:
+            cos = np.clip((np.einsum("kij,kij->k", R, other) - 1.0) / 2.0, -1.0, 1.0)
+            freeze = (np.arccos(cos) < limit) & apart
+        if calls[0] < 3:
+            return freeze, never
         rival = sse.reshape(-1, 2)[:, ::-1].reshape(-1)
-        settle = (sse > rival + settle_px2) & (calls[0] >= 3)
-        return np.asarray(freeze, dtype=bool), np.asarray(settle, dtype=bool)
+        return freeze, np.asarray(sse > rival + settle_px2, dtype=bool)
 
     return rule
 
@@ -376,7 +377,7 @@ def _covariances(
         s = 2.0 * np.sqrt(np.maximum(spread, 0.0)) / np.einsum("ki,ki->k", d, d)
     s = np.where(np.isnan(s), 0.0, np.minimum(s, 0.5))  # nan_to_num, then at most 0.5
     # only where the shift turns the pose by more than ~2 deg does the information change
-    rows = np.flatnonzero((s * np.linalg.norm(d[:, 3:], axis=1) > 0.03) & np.isfinite(spread))
+    rows = np.flatnonzero((s * row_norms(d[:, 3:]) > 0.03) & np.isfinite(spread))
     if len(rows):
         T = SE3.from_trusted(R2[rows], t2[rows])
         shifted = _plus(T, s[rows, None] * d[rows])

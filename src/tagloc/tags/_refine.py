@@ -82,20 +82,20 @@ def _residuals(
     t: FloatArray,
     points_obj: FloatArray,
     pixels: FloatArray,
-    hat_obj: FloatArray | None = None,
+    neg_hat_obj: FloatArray | None = None,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Residuals ``(K, 2N)``, Jacobians ``(K, 2N, 6)`` and SSE ``(K,)`` (inf where invalid).
 
-    ``hat_obj`` is ``[p]x`` (K, N, 3, 3) of ``points_obj`` (computed if None).
+    ``neg_hat_obj`` is ``-[p]x`` (K, N, 3, 3) of ``points_obj`` (computed if None).
     """
     k, n = points_obj.shape[:2]
-    if hat_obj is None:
-        hat_obj = _hat(points_obj)
+    if neg_hat_obj is None:
+        neg_hat_obj = _hat(-points_obj)
     points_cam = np.einsum("kij,knj->kni", R, points_obj) + t[:, None, :]
     px, J_px_p = camera.project_with_jacobian(points_cam.reshape(-1, 3))
     J_p_xi = np.empty((k, n, 3, 6))
     J_p_xi[..., :3] = R[:, None]
-    J_p_xi[..., 3:] = -np.einsum("kij,knjl->knil", R, hat_obj)
+    J_p_xi[..., 3:] = np.einsum("kij,knjl->knil", R, neg_hat_obj)
     J = (J_px_p.reshape(k, n, 2, 3) @ J_p_xi).reshape(k, 2 * n, 6)
     r = (px.reshape(k, n, 2) - pixels).reshape(k, 2 * n)
     sse = np.einsum("ki,ki->k", r, r)
@@ -158,11 +158,11 @@ def refine_poses(
     n = points_obj.shape[-2]
     points = np.broadcast_to(points_obj, (k, n, 3))
     observed = np.broadcast_to(pixels, (k, n, 2))
-    hat_obj = np.broadcast_to(_hat(points_obj), (k, n, 3, 3))
+    neg_hat_obj = np.broadcast_to(_hat(-points_obj), (k, n, 3, 3))
     # arrays are replaced, never written: the initial ones stay as they were
     R = R_init = np.array(R_cam_obj, dtype=np.float64)
     t = t_init = np.array(t_cam_obj, dtype=np.float64)
-    r, J, sse = _residuals(camera, R, t, points, observed, hat_obj)
+    r, J, sse = _residuals(camera, R, t, points, observed, neg_hat_obj)
     J0, sse0 = J, sse
     lam = np.full(k, 1e-3)
     done = np.zeros(k, dtype=bool)
@@ -182,7 +182,7 @@ def refine_poses(
             break
         R_new = R @ _cayley(step[:, 3:])
         t_new = t + np.einsum("kij,kj->ki", R, step[:, :3])
-        r_new, J_new, sse_new = _residuals(camera, R_new, t_new, points, observed, hat_obj)
+        r_new, J_new, sse_new = _residuals(camera, R_new, t_new, points, observed, neg_hat_obj)
         better = (sse_new < sse) & ~stopped
         moved = bool(better.any())
         if moved:

@@ -38,6 +38,7 @@ Plus the covariance of the derived ``T_map_cam`` / ``T_map_base`` (:func:`map_ca
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -46,6 +47,7 @@ import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict, Field
 
 from tagloc.geometry import SE3, cov_compose, cov_inverse, se3_right_jacobian_inv
+from tagloc.geometry.small_batch import row_norms
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -248,14 +250,21 @@ def linearized_pose_covariance(
     if noise.second_order:
         cov[:, :3, :3] += second_order_term(cov)
     # 4. systematic depth error along the line of sight (object frame)
-    range_m = np.linalg.norm(t, axis=1)
+    range_m = row_norms(t)
     with np.errstate(all="ignore"):
         ray_obj = np.einsum("kji,kj->ki", R, t) / range_m[:, None]
         rel = np.hypot(2.0 * noise.corner_bias_px / np.asarray(extent_px), noise.scale_rel)
     cov[:, :3, :3] += (rel * range_m)[:, None, None] ** 2 * (ray_obj[:, :, None] * ray_obj[:, None])
     # 5. floor
-    floor = [noise.floor_translation_m**2] * 3 + [noise.floor_rotation_rad**2] * 3
-    return _sym(cov + np.diag(floor))
+    return _sym(cov + _floor(noise.floor_translation_m, noise.floor_rotation_rad))
+
+
+@functools.lru_cache(maxsize=16)
+def _floor(floor_translation_m: float, floor_rotation_rad: float) -> FloatArray:
+    """``diag(floor_translation_m^2 x 3, floor_rotation_rad^2 x 3)`` (read-only)."""
+    floor = np.diag([floor_translation_m**2] * 3 + [floor_rotation_rad**2] * 3)
+    floor.flags.writeable = False
+    return floor
 
 
 def laplace_covariance(
@@ -391,8 +400,9 @@ def map_cam_from_tag(
     """
     T_tag_cam = T_cam_tag.inverse()
     cov_tag_cam = cov_inverse(T_cam_tag, cov_cam_tag)
-    c_map = np.zeros((6, 6)) if cov_map_tag is None else cov_map_tag
-    return T_map_tag @ T_tag_cam, cov_compose(T_map_tag, c_map, T_tag_cam, cov_tag_cam)
+    if cov_map_tag is None:  # cov_compose(T_map_tag, 0, T_tag_cam, C) is C (symmetric) exactly
+        return T_map_tag @ T_tag_cam, cov_tag_cam
+    return T_map_tag @ T_tag_cam, cov_compose(T_map_tag, cov_map_tag, T_tag_cam, cov_tag_cam)
 
 
 def map_base_from_cam(

@@ -38,6 +38,7 @@ import numpy.typing as npt
 
 from tagloc.camera import CameraModel
 from tagloc.geometry import SE3
+from tagloc.geometry.small_batch import row_norms
 from tagloc.tags._branches import (
     Branches,
     Refined,
@@ -73,28 +74,29 @@ __all__ = [
 ]
 
 FloatArray = npt.NDArray[np.float64]
+_EYE3 = np.eye(3)
 
 
 class TagPoseError(TagError, ValueError):
     """A tag whose corners give no pose (outside the camera model, degenerate, behind)."""
 
 
-def _ippe_square(normalized: FloatArray, points_tag: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Both IPPE_SQUARE solutions ``(2, 3, 3)``, ``(2, 3)`` for one tag (NaN if none)."""
-    R = np.full((2, 3, 3), np.nan)
-    t = np.full((2, 3), np.nan)
+def _ippe_square(
+    normalized: FloatArray, points_tag: FloatArray, R: FloatArray, t: FloatArray
+) -> None:
+    """Both IPPE_SQUARE solutions of one tag into ``R`` (2, 3, 3), ``t`` (2, 3) (left as they
+    are, NaN, if there is none)."""
     try:
         n, rvecs, tvecs, _ = cv2.solvePnPGeneric(
-            points_tag, normalized, np.eye(3), None, flags=cv2.SOLVEPNP_IPPE_SQUARE
+            points_tag, normalized, _EYE3, None, flags=cv2.SOLVEPNP_IPPE_SQUARE
         )
     except cv2.error:
-        return R, t
+        return
     for i in range(min(int(n), 2)):
         R[i] = cv2.Rodrigues(rvecs[i])[0]
         t[i] = np.ravel(tvecs[i])
     if int(n) == 1:
         R[1], t[1] = R[0], t[0]
-    return R, t
 
 
 @np.errstate(all="ignore")  # NaN/inf mark invalid candidates on purpose
@@ -177,13 +179,12 @@ def refine_tag_problems(
         normalized = camera.undistort(corners.reshape(-1, 2)).reshape(m, 4, 2)
     R0, t0 = np.full((m, 2, 3, 3), np.nan), np.full((m, 2, 3), np.nan)
     for i in np.flatnonzero(np.isfinite(normalized).all(axis=(1, 2)) & (size > 0)):
-        R0[i], t0[i] = _ippe_square(normalized[i], objects[i])
+        _ippe_square(normalized[i], objects[i], R0[i], t0[i])
     valid = np.isfinite(R0).all(axis=(2, 3)) & np.isfinite(t0).all(axis=2)
     valid &= np.where(valid, t0[..., 2], 0.0) > 0.0
     # 3. refine both, rank (the valley and covariances are finish_branches')
     diagonal_px = 0.5 * (
-        np.linalg.norm(corners[:, 2] - corners[:, 0], axis=1)
-        + np.linalg.norm(corners[:, 3] - corners[:, 1], axis=1)
+        row_norms(corners[:, 2] - corners[:, 0]) + row_norms(corners[:, 3] - corners[:, 1])
     )
     refined = refine_branches(R0, t0, valid, objects, corners, camera, noise, diagonal_px)
     return TagProblems(tuple(int(i) for i in tag_ids), size, refined)
@@ -193,7 +194,7 @@ def refine_tag_problems(
 def tag_estimates(problems: TagProblems, br: Branches) -> list[TagPoseEstimate | None]:
     """The estimates of :func:`estimate_tag_poses` from the finished ``problems``."""
     size = problems.sizes
-    range_m = np.linalg.norm(br.t[:, 0], axis=1)
+    range_m = row_norms(br.t[:, 0])
     err = np.sqrt(br.sse_px2 / 4.0)
     ok = np.asarray(np.isfinite(br.cov[:, 0]).all(axis=(1, 2)), dtype=bool)
     T_best, T_alt = br.T_best, br.T_alt
