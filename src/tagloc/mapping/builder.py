@@ -32,9 +32,14 @@ from dataclasses import replace
 import numpy as np
 
 from tagloc.geometry import SE3
-from tagloc.mapping.calibration import OdometryCalibration, apply_calibration, fit_calibration
+from tagloc.mapping.calibration import (
+    OdometryCalibration,
+    apply_calibration,
+    calibration_from_vector,
+    calibration_vector,
+    fit_calibration,
+)
 from tagloc.mapping.config import MapBuildConfig
-from tagloc.mapping.corner_graph import solve_corner_graph
 from tagloc.mapping.flips import flip_stuck_tags
 from tagloc.mapping.graph import (
     GraphInput,
@@ -50,6 +55,7 @@ from tagloc.mapping.initialize import (
     inverse_h,
 )
 from tagloc.mapping.observations import Observations, collect_observations
+from tagloc.mapping.refine import State, refine_with_corners
 from tagloc.mapping.report import BuildReport, TagQA, reprojection_residuals, rms
 from tagloc.mapping.survey import MappingError, Survey, TagKey
 from tagloc.tags.tagmap import DEFAULT_FAMILY, TagEntry, TagMap
@@ -58,6 +64,8 @@ logger = logging.getLogger(__name__)
 
 #: ``progress(stage, done, total)``; stages ``"pnp"``, ``"optimize"``.
 ProgressFn = Callable[[str, int, int], None]
+#: Corner refinements after which stuck tilts are tested and flipped (then refined again).
+MAX_FLIP_PASSES = 2
 Anchors = Mapping[int, SE3] | Mapping[TagKey, SE3]
 
 
@@ -150,11 +158,12 @@ def build_tag_map(
     solution: GraphSolution | None = None
     iterations, optimize_s, error_initial = 0, 0.0, float("nan")
     n_rounds = config.rounds + config.calibration_rounds
+    pose_config = _pose_round_config(config)
     for round_ in range(n_rounds):
         if progress is not None:
             progress("optimize", round_, n_rounds)
         data = _graph_input(obs, M_odom_base, branch, M_anchor, M_map_base, M_map_tag)
-        solution = solve_graph(data, config)
+        solution = solve_graph(data, pose_config)
         iterations += solution.iterations
         optimize_s += solution.optimize_s
         error_initial = solution.error_initial if round_ == 0 else error_initial
@@ -174,29 +183,38 @@ def build_tag_map(
             break
     assert solution is not None
     ambiguous: list[int] = []
-    for _ in range(2 if config.factors == "corners" else 0):
-        data = _graph_input(obs, M_odom_base, branch, M_anchor, M_map_base, M_map_tag)
-        solution = solve_corner_graph(data, obs, survey.cameras, survey.T_base_cam, config)
+    held = M_anchor or {int(obs.tag[0]): M_map_tag[int(obs.tag[0])]}
+    state = State(M_map_base, M_map_tag, calibration_vector(calibration))
+    for pass_ in range(MAX_FLIP_PASSES + 1 if config.factors == "corners" else 0):
+        solution, state = refine_with_corners(
+            obs, M_odom_raw, state, held, survey.cameras, survey.T_base_cam, config,
+            config.joint_calibration,
+        )  # fmt: skip
         iterations += solution.iterations
         optimize_s += solution.optimize_s
-        M_map_base = solution.M_map_base
+        if pass_ == MAX_FLIP_PASSES:
+            break
         M_map_tag, flipped, ambiguous = flip_stuck_tags(
-            obs, M_map_base, solution.M_map_tag, set(M_anchor), survey.cameras,
+            obs, state.M_map_base, state.M_map_tag, set(M_anchor), survey.cameras,
             survey.T_base_cam, config.pnp_noise.sigma_px,
         )  # fmt: skip
-        branch = choose_branches(obs, M_map_base, M_map_tag)
         logger.info("corner refinement: flipped tags %s", [obs.tag_keys[j][1] for j in flipped])
         if not flipped:
             break
+        state = State(state.M_map_base, M_map_tag, state.c)
+    if config.factors == "corners":
+        calibration = calibration_from_vector(state.c)
+        logger.info("odometry calibration after the refinement: %s", calibration)
     if progress is not None:
         progress("optimize", config.rounds, config.rounds)
     timings["optimize"] = optimize_s
     timings["graph"] = time.perf_counter() - t - optimize_s
     # 4. covariances
     t = time.perf_counter()
-    if config.compute_covariance:
-        # the pose-factor graph linearized at the final estimate: the same information as the
-        # corners (Gauss-Newton), and well conditioned (no near-rigid corner constraints)
+    if config.compute_covariance and config.factors == "corners":
+        # the last linearization of the refinement: the corners' Gauss-Newton information
+        solution = marginal_covariances(solution)
+    elif config.compute_covariance:
         data = _graph_input(
             obs, M_odom_base, branch, M_anchor, solution.M_map_base, solution.M_map_tag
         )
@@ -216,6 +234,23 @@ def build_tag_map(
     object.__setattr__(report, "iterations", iterations)
     object.__setattr__(report, "error_initial", error_initial)
     return tag_map, report
+
+
+def _pose_round_config(config: MapBuildConfig) -> MapBuildConfig:
+    """``config`` with the odometry variances scaled by ``pose_round_odometry_var_scale``."""
+    scale = config.pose_round_odometry_var_scale
+    if scale == 1.0:
+        return config
+    noise = config.odometry
+    odometry = noise.model_copy(
+        update={
+            "translation_var_per_m": scale * noise.translation_var_per_m,
+            "translation_var_per_rad": scale * noise.translation_var_per_rad,
+            "rotation_var_per_m": scale * noise.rotation_var_per_m,
+            "rotation_var_per_rad": scale * noise.rotation_var_per_rad,
+        }
+    )
+    return config.model_copy(update={"odometry": odometry})
 
 
 def _odometry_in_map(obs: Observations, M_map_base_init: np.ndarray) -> np.ndarray:

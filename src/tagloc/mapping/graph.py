@@ -94,6 +94,9 @@ class GraphSolution:
         Wall time in GTSAM's optimizer and in ``Marginals``.
     graph, values : gtsam.NonlinearFactorGraph, gtsam.Values
         The graph and its optimum (for :func:`marginal_covariances`).
+    linear : gtsam.GaussianFactorGraph or None
+        Instead, the graph linearized at the optimum, in tagloc's tangent order (the corner
+        refinement, :mod:`tagloc.mapping.refine`).
     """
 
     M_map_base: FloatArray
@@ -107,6 +110,7 @@ class GraphSolution:
     marginals_s: float
     graph: gtsam.NonlinearFactorGraph
     values: gtsam.Values
+    linear: gtsam.GaussianFactorGraph | None = None
 
 
 def odometry_sigmas(M_odom_base: FloatArray, noise: OdometryNoise) -> FloatArray:
@@ -198,8 +202,12 @@ def mahalanobis(
 def marginal_covariances(solution: GraphSolution) -> GraphSolution:
     """``solution`` with the marginal covariance of every tag (``gtsam.Marginals``)."""
     start = time.perf_counter()
-    marginals = gtsam.Marginals(solution.graph, solution.values)
-    cov = {j: cov_from_gtsam(marginals.marginalCovariance(L(j))) for j in solution.M_map_tag}
+    if solution.linear is not None:  # already in tagloc order
+        marginals = gtsam.Marginals(solution.linear, solution.linear.optimize())
+        cov = {j: marginals.marginalCovariance(L(j)) for j in solution.M_map_tag}
+    else:
+        marginals = gtsam.Marginals(solution.graph, solution.values)
+        cov = {j: cov_from_gtsam(marginals.marginalCovariance(L(j))) for j in solution.M_map_tag}
     return replace(solution, cov_map_tag=cov, marginals_s=time.perf_counter() - start)
 
 

@@ -91,7 +91,8 @@ def interpolate_odometry(survey: Survey, stamps_ns: IntArray) -> SE3:
     return T[idx].interpolate_rt(T[idx + 1], np.clip(alpha, 0.0, 1.0))
 
 
-def _hat(v: FloatArray) -> FloatArray:
+def hat(v: FloatArray) -> FloatArray:
+    """``(..., 3, 3)`` skew-symmetric matrices of ``(..., 3)`` vectors (``hat(a) @ b = a x b``)."""
     out = np.zeros((*v.shape[:-1], 3, 3))
     out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
     out[..., 1, 0], out[..., 2, 0], out[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
@@ -116,7 +117,7 @@ def pixel_covariance(
     _, J_px_p = camera.project_with_jacobian(points_cam.reshape(-1, 3))
     J_p_xi = np.empty((m, 4, 3, 6))
     J_p_xi[..., :3] = R[:, None]
-    J_p_xi[..., 3:] = -np.einsum("mij,mnjl->mnil", R, _hat(points_tag))
+    J_p_xi[..., 3:] = -np.einsum("mij,mnjl->mnil", R, hat(points_tag))
     J = (J_px_p.reshape(m, 4, 2, 3) @ J_p_xi).reshape(m, 8, 6)
     info = np.einsum("mki,mkj->mij", J, J) / noise.sigma_px**2
     floor = [noise.floor_translation_m**2] * 3 + [noise.floor_rotation_rad**2] * 3

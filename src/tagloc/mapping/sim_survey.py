@@ -15,18 +15,53 @@ import numpy as np
 import numpy.typing as npt
 
 from tagloc.mapping.builder import ProgressFn, build_tag_map
-from tagloc.mapping.config import MapBuildConfig
+from tagloc.mapping.config import MapBuildConfig, OdometryNoise
 from tagloc.mapping.report import BuildReport
 from tagloc.mapping.survey import CameraFrame, Survey
 from tagloc.sim.drive import Drive
 from tagloc.sim.observations import ObservationConfig, ObservedFrame, simulate_observations
+from tagloc.sim.odometry import DriftParameters, LeggedOdometryConfig, WheelOdometryConfig
 from tagloc.sim.world import World
+from tagloc.tags.covariance import NoiseModel
 from tagloc.tags.tagmap import TagMap
 
 CAMERA = "cam0"
-#: Legged kinematic odometry has a 4 % scale error: calibrate it; it has no one-frame jumps, so
-#: its factors stay Gaussian (see ``MapBuildConfig``).
-SIM_CALIBRATION_ROUNDS = 3
+
+
+def odometry_noise_of(odometry: WheelOdometryConfig | LeggedOdometryConfig) -> OdometryNoise:
+    """The builder's odometry noise matching a simulated drift model's random part.
+
+    The simulator's random walk (:mod:`tagloc.sim.odometry`) has, per metre ``d`` and radian
+    ``a`` travelled, variances ``sigma_xy^2 d`` on x and y and ``sigma_yaw^2 d +
+    sigma_yaw_turn^2 a`` on yaw; foot slips (a Poisson rate per metre) add their variance per
+    metre. Its systematic part (scales, biases, crab drift) is left to the calibration.
+    """
+    p = DriftParameters.from_config(odometry)
+    return OdometryNoise(
+        translation_var_per_m=p.sigma_xy_per_sqrt_m**2 + p.slip_rate_per_m * p.slip_sigma_xy_m**2,
+        translation_var_per_rad=0.0,
+        rotation_var_per_m=p.sigma_yaw_per_sqrt_m**2 + p.slip_rate_per_m * p.slip_sigma_yaw**2,
+        rotation_var_per_rad=p.sigma_yaw_per_sqrt_rad**2,
+    )
+
+
+def sim_build_config(drive: Drive, observation_config: ObservationConfig | None) -> MapBuildConfig:
+    """The map-build configuration that matches a simulated drive's noise.
+
+    Odometry noise from :func:`odometry_noise_of`, corner noise from the observation config;
+    the odometry's systematic errors calibrated jointly with the map (one alternation round to
+    start, the pose rounds with 10 times the variance: they run on uncalibrated odometry);
+    Gaussian odometry factors (the simulated odometry has no one-frame jumps).
+    """
+    sigma_px = (observation_config or ObservationConfig()).pixel_sigma_px
+    return MapBuildConfig(
+        odometry=odometry_noise_of(drive.world.robot.odometry),
+        pnp_noise=NoiseModel(sigma_px=max(sigma_px, 0.05)),
+        calibration_rounds=1,
+        joint_calibration=True,
+        pose_round_odometry_var_scale=10.0,
+        odometry_robust_k=None,
+    )
 
 
 def survey_from_drive(
@@ -88,8 +123,7 @@ def build_map_from_drive(
         Tag ids (tag36h11) whose true pose is given as surveyed; default: the first tag truly
         detected.
     config : MapBuildConfig, optional
-        Default: defaults with ``calibration_rounds=3`` (legged odometry's scale error) and
-        Gaussian odometry factors (``odometry_robust_k=None``).
+        Default: :func:`sim_build_config` (noise models matching the simulation).
     camera_stride : int
         Use every n-th camera frame.
     progress : callable, optional
@@ -101,9 +135,7 @@ def build_map_from_drive(
         anchors = [next(s.tag_id for f in observed for s in f.truth if s.detected)]
     world = drive.world
     T_map_anchor = {i: world.T_map_tag(world.find_tag(i)) for i in anchors}
-    config = config or MapBuildConfig(
-        calibration_rounds=SIM_CALIBRATION_ROUNDS, odometry_robust_k=None
-    )
+    config = config or sim_build_config(drive, observation_config)
     return build_tag_map(survey, T_map_anchor, config, progress)
 
 

@@ -1,0 +1,124 @@
+"""Odometry and anchor factors linearized in numpy, with the odometry calibration as a variable.
+
+For the corner refinement (:mod:`tagloc.mapping.refine`), every factor is linearized here and
+handed to GTSAM's sparse linear solver. The odometry factor between keyframes ``k-1`` and ``k``
+is
+
+.. math:: e_k = \\mathrm{Log}\\left(Z_k(c)^{-1}\\, x_{k-1}^{-1} x_k\\right) / \\sigma_k
+
+with ``Z_k(c)`` the raw odometry step corrected by the calibration vector ``c``
+(:func:`~tagloc.mapping.calibration.corrected_steps`: distance scale and crab drift, turn scale,
+yaw bias per metre) and ``sigma_k`` the random-walk noise of
+:func:`tagloc.mapping.graph.odometry_sigmas`. Right perturbations ``x Exp(xi)``,
+``xi = [x, y, z, rx, ry, rz]``; with ``B = x_{k-1}^-1 x_k``, ``E = Z^-1 B`` and
+``J = J_r^-1(Log E)`` (Sola et al. 2018, Sec. IV-B):
+
+- ``d e / d xi_k = J``; ``d e / d xi_{k-1} = -J Ad(B^-1)``;
+- ``d e / d c = -J Ad(E^-1) D`` with ``D`` the right-tangent derivative of ``Z`` in ``c``
+  (central differences, vectorized over all steps).
+
+Estimating ``c`` jointly with the map, instead of alternating fit and optimization, removes the
+systematic part of legged odometry drift that alternation leaves behind (it converges slowly
+because trajectory and calibration are strongly coupled).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+from tagloc.geometry import SE3
+from tagloc.mapping.calibration import N_CALIBRATION, calibration_from_vector, corrected_steps
+from tagloc.mapping.initialize import inverse_h
+from tagloc.mapping.observations import hat
+
+FloatArray = npt.NDArray[np.float64]
+#: Central-difference step for ``d Z / d c``.
+_H = 1e-6
+
+
+def log_batch(M: FloatArray) -> FloatArray:
+    """``(n, 6)`` SE(3) logarithm ``[x, y, z, rx, ry, rz]`` of ``(n, 4, 4)`` rigid transforms."""
+    if len(M) == 0:
+        return np.zeros((0, 6))
+    return np.asarray(SE3.from_matrix(M, normalize=True).log())
+
+
+def adjoint(M: FloatArray) -> FloatArray:
+    """``(n, 6, 6)`` adjoint of ``T = (R, t)`` in tagloc order: ``[[R, hat(t) R], [0, R]]``."""
+    R, t = M[:, :3, :3], M[:, :3, 3]
+    A = np.zeros((len(M), 6, 6))
+    A[:, :3, :3] = R
+    A[:, 3:, 3:] = R
+    A[:, :3, 3:] = hat(t) @ R
+    return A
+
+
+def odometry_residuals(
+    M_map_base: FloatArray, step_raw: FloatArray, c: FloatArray, sigmas: FloatArray
+) -> FloatArray:
+    """``(K-1, 6)`` whitened odometry errors ``e_k`` (module docstring)."""
+    Z = corrected_steps(step_raw, calibration_from_vector(c))
+    B = inverse_h(M_map_base[:-1]) @ M_map_base[1:]
+    return log_batch(inverse_h(Z) @ B) / sigmas
+
+
+def linearize_odometry(
+    M_map_base: FloatArray,
+    step_raw: FloatArray,
+    c: FloatArray,
+    sigmas: FloatArray,
+    calibrate: bool,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray | None]:
+    """Whitened errors and Jacobians of the odometry factors at the given state.
+
+    Parameters
+    ----------
+    M_map_base : (K, 4, 4) float
+    step_raw : (K-1, 4, 4) float
+        Raw odometry steps ``T_odom_base_{k-1}^-1 T_odom_base_k``.
+    c : (6,) float
+        Calibration vector (:func:`~tagloc.mapping.calibration.calibration_vector`).
+    sigmas : (K-1, 6) float
+    calibrate : bool
+        Also return the Jacobian in ``c``.
+
+    Returns
+    -------
+    e : (K-1, 6) float
+    A_prev, A_next : (K-1, 6, 6) float
+        ``d e / d xi`` of keyframes ``k-1`` and ``k``.
+    A_c : (K-1, 6, 6) float or None
+    """
+    if len(step_raw) == 0:  # a single keyframe
+        empty = np.zeros((0, 6, 6))
+        return (
+            np.zeros((0, 6)),
+            empty,
+            empty,
+            (np.zeros((0, 6, N_CALIBRATION)) if calibrate else None),
+        )
+    Z = corrected_steps(step_raw, calibration_from_vector(c))
+    B = inverse_h(M_map_base[:-1]) @ M_map_base[1:]
+    E = inverse_h(Z) @ B
+    e, J_e_E = SE3.from_matrix(E, normalize=True).log(jacobians=True)  # J_r^-1(e)
+    whiten = 1.0 / sigmas[:, :, None]
+    A_next = J_e_E * whiten
+    A_prev = -(J_e_E @ adjoint(inverse_h(B))) * whiten
+    if not calibrate:
+        return e / sigmas, A_prev, A_next, None
+    Z_inv = inverse_h(Z)
+    D = np.empty((len(Z), 6, N_CALIBRATION))
+    for i in range(N_CALIBRATION):
+        dc = np.zeros(N_CALIBRATION)
+        dc[i] = _H
+        Z_plus = corrected_steps(step_raw, calibration_from_vector(c + dc))
+        Z_minus = corrected_steps(step_raw, calibration_from_vector(c - dc))
+        D[:, :, i] = (log_batch(Z_inv @ Z_plus) - log_batch(Z_inv @ Z_minus)) / (2 * _H)
+    A_c = -(J_e_E @ adjoint(inverse_h(E)) @ D) * whiten
+    return e / sigmas, A_prev, A_next, A_c
+
+
+def prior_residuals(M: FloatArray, M_prior: FloatArray, sigmas: FloatArray) -> FloatArray:
+    """``(n, 6)`` whitened ``Log(M_prior^-1 M) / sigmas`` of pose priors (Jacobian ``1/sigma``)."""
+    return log_batch(inverse_h(M_prior) @ M) / sigmas
