@@ -22,9 +22,14 @@ Joint PnP (:func:`estimate_joint_pose`): the same refinement on all corners of a
 map pose, started from the best-fitting branches of the tags, solved in a frame at the corners'
 centroid (map axes) so that the covariance's natural origin is where the tags are.
 
-Both run :func:`solve_branches`: refine every candidate, keep the best minimum and the best
-*other* minimum (else the worst raw candidate), measure the valley between them, and compute
-both covariances.
+Both run :func:`solve_branches` (:mod:`tagloc.tags._branches`): refine every candidate
+(:func:`refine_poses`, :mod:`tagloc.tags._refine`), keep the best minimum and the best *other*
+minimum (else the worst raw candidate), measure the valley between them, and compute both
+covariances. Each public function is a refine stage (:func:`refine_tag_problems`,
+:func:`refine_joint_problem`), :func:`finish_branches` and an assembly stage
+(:func:`tag_estimates`, :func:`joint_estimate`); :func:`finish_branches` takes the problems of
+both stages at once, which :func:`~tagloc.tags.observation.observe_tags` uses
+(:mod:`tagloc.tags._frame`). The result types are in :mod:`tagloc.tags.estimates`.
 """
 
 from __future__ import annotations
@@ -42,7 +47,6 @@ from tagloc.geometry.small_batch import row_norms
 from tagloc.tags._branches import (
     Branches,
     Refined,
-    _as_se3,
     branch_valley,
     finish_branches,
     refine_branches,
@@ -58,19 +62,25 @@ from tagloc.tags.estimates import JointPoseEstimate, TagPoseEstimate, _ratio
 __all__ = [
     "Branches",
     "JointPoseEstimate",
+    "JointProblem",
     "Refined",
     "Refinement",
     "StopRule",
     "TagPoseError",
     "TagPoseEstimate",
+    "TagProblems",
     "branch_valley",
     "estimate_joint_pose",
     "estimate_tag_pose",
     "estimate_tag_poses",
     "finish_branches",
+    "joint_estimate",
     "refine_branches",
+    "refine_joint_problem",
     "refine_poses",
+    "refine_tag_problems",
     "solve_branches",
+    "tag_estimates",
 ]
 
 FloatArray = npt.NDArray[np.float64]
@@ -369,7 +379,7 @@ def joint_estimate(
         return None
     poses, covs = [], []
     for b in (0, 1):
-        T_cam_clu = _as_se3(br.R[0, b], br.t[0, b])
+        T_cam_clu = SE3.from_trusted(br.R[0, b], br.t[0, b])
         T_map_cam, cov = map_cam_from_tag(T_cam_clu, br.cov[0, b], problem.T_map_clu)
         poses.append(T_map_cam)
         covs.append(cov)
