@@ -115,7 +115,7 @@ def test_optimization_removes_the_odometry_drift(
     assert before > 2.0  # the survey really drifted
     assert after < 0.05 * before
     assert 0.35 <= report.reproj_rms_px <= 0.5  # corner noise 0.3 px per axis: 0.42 px
-    assert report.outliers == 0 and report.disagreeing_tags == ()
+    assert report.outliers <= 3 and report.disagreeing_tags == ()  # measured 0
 
 
 def test_glints_are_flagged_and_do_not_fold_the_map(

@@ -27,6 +27,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
+from tagloc.errors import GeometryError
 from tagloc.geometry import SE3
 from tagloc.mapping.calibration import N_CALIBRATION, calibration_from_vector, corrected_steps
 from tagloc.mapping.initialize import inverse_h
@@ -41,7 +42,16 @@ def log_batch(M: FloatArray) -> FloatArray:
     """``(n, 6)`` SE(3) logarithm ``[x, y, z, rx, ry, rz]`` of ``(n, 4, 4)`` rigid transforms."""
     if len(M) == 0:
         return np.zeros((0, 6))
-    return np.asarray(SE3.from_matrix(M, normalize=True).log())
+    return np.asarray(_se3(M).log())
+
+
+def _se3(M: FloatArray) -> SE3:
+    """``M`` as an SE3 batch; projected onto SO(3) only if rounding has left it off (the SVD
+    of every matrix was a tenth of the refinement's time)."""
+    try:
+        return SE3.from_matrix(M)
+    except GeometryError:
+        return SE3.from_matrix(M, normalize=True)
 
 
 def adjoint(M: FloatArray) -> FloatArray:
@@ -101,7 +111,7 @@ def linearize_odometry(
     Z = corrected_steps(step_raw, calibration_from_vector(c))
     B = inverse_h(M_map_base[:-1]) @ M_map_base[1:]
     E = inverse_h(Z) @ B
-    e, J_e_E = SE3.from_matrix(E, normalize=True).log(jacobians=True)  # J_r^-1(e)
+    e, J_e_E = _se3(E).log(jacobians=True)  # J_r^-1(e)
     whiten = 1.0 / sigmas[:, :, None]
     A_next = J_e_E * whiten
     A_prev = -(J_e_E @ adjoint(inverse_h(B))) * whiten
