@@ -85,6 +85,38 @@ def test_bad_arguments_fail_in_one_line(
     assert not out.exists()
 
 
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("tags: [\n", "line 2, column 1: invalid YAML"),
+        (
+            "version: 1\ntags:\n  - {id: 1, family: tag36h11, size: -0.1, frame: map, "
+            "position: [0, 0, 0], quat_xyzw: [0, 0, 0, 1]}\n",
+            "tags[0] (id 1): size: must be > 0",
+        ),
+    ],
+)
+def test_malformed_anchor_map_fails_before_reading_the_bag(
+    tmp_path: Path, text: str, message: str
+) -> None:
+    bad, out = tmp_path / "anchors.yaml", tmp_path / "tags.yaml"
+    bad.write_text(text)
+    result = _tagloc(
+        "map", "build", "--bag", str(tmp_path / "missing.bag"), "--cameras",
+        str(tmp_path / "cameras.yaml"), "--anchors", str(bad), "--out", str(out),
+    )  # fmt: skip
+    assert result.returncode == 1
+    assert result.stderr.count("\n") == 1 and f"{bad}: {message}" in result.stderr
+    assert not out.exists()
+
+
+def test_anchor_map_with_sim_is_refused(tmp_path: Path) -> None:
+    out = tmp_path / "tags.yaml"
+    result = _tagloc("map", "build", "--sim", "--anchors", "x.yaml", "--out", str(out))
+    assert result.returncode == 1 and "--anchors is for --bag" in result.stderr
+    assert result.stderr.count("\n") == 1 and not out.exists()
+
+
 def _dupont_args(tmp_path: Path) -> list[str]:
     if not (DUPONT / "tag_detections.bag.bz2").is_file():
         pytest.skip(f"dupont data set not found at {DUPONT.resolve()} (../shared/data/dupont)")

@@ -2,7 +2,10 @@
 
 No ground truth here (the laser survey is held out): the checks are what the data says, per the
 data set's README: all 20 tags mapped (381 ignored), per-corner reprojection residuals per
-camera, the corner order pinned by gravity, and left-vs-right agreement (slow).
+camera, the corner order pinned by gravity, and left-vs-right agreement (slow). Measured with the
+default configuration: reprojection RMS 0.46 px in each camera, 56 of 3,634 observations
+outliers, 3 s to build (6 s with reading the bag); the maps from the left camera alone and the
+right camera alone: median gap 101 mm, largest 191 mm over the 18 tags both see.
 """
 
 from __future__ import annotations
@@ -86,7 +89,7 @@ def test_all_twenty_tags_are_mapped_with_sub_pixel_residuals(
     assert [e.id for e in tag_map.anchors] == [6]
     assert report.dropped["ignored_tag"] == 1
     assert set(report.reproj_rms_px_per_camera) == {"cam0", "cam1"}
-    assert all(v < 0.6 for v in report.reproj_rms_px_per_camera.values())
+    assert all(v < 0.55 for v in report.reproj_rms_px_per_camera.values())
     assert report.outliers < 0.02 * report.observations
     assert report.correction_m().max() > 1.0  # the VIO really drifted
     assert seconds < 20.0
@@ -105,4 +108,5 @@ def test_left_and_right_cameras_agree(
         for i in both
     ]
     assert len(both) >= 18
-    assert float(np.median(gaps)) < 0.35
+    assert float(np.median(gaps)) < 0.15  # measured 0.101
+    assert float(np.max(gaps)) < 0.3  # measured 0.191 (the anchor's gap is ~0)

@@ -186,7 +186,10 @@ def map_build(
     report: Annotated[Path | None, typer.Option(help="QA report file (.json or .md).")] = None,
     calibrate_odometry: Annotated[
         int | None,
-        typer.Option(help="Odometry self-calibration rounds (default: 3 with --sim, else 0)."),
+        typer.Option(
+            help="Odometry self-calibration rounds (default: with --sim the simulation's "
+            "matched configuration, 1 round then joint; else 0)."
+        ),
     ] = None,
 ) -> None:
     """Build a tag map from a survey drive (a bag, or --sim) and print its QA report."""
@@ -194,16 +197,23 @@ def map_build(
 
     from tagloc.fileutil import atomic_write_text
     from tagloc.mapping import MapBuildConfig, MappingError, build_map_from_drive, build_tag_map
+    from tagloc.mapping.sim_survey import sim_build_config
     from tagloc.tags.tagmap import load_tag_map, save_tag_map
 
     if sim == (bag is not None):
         raise MappingError("give exactly one of --bag PATH or --sim")
+    if sim and anchors is not None:
+        raise MappingError("--anchors is for --bag (with --sim, give --anchor ID: true poses)")
     try:
         sizes = {int(k): float(str(v)) for k, v in _pairs(size, "--size", float).items()}
     except ValueError:
         raise MappingError(f"--size {size}: expected ID=EDGE_M with an integer id") from None
-    rounds = calibrate_odometry if calibrate_odometry is not None else (3 if sim else 0)
-    config = MapBuildConfig(calibration_rounds=max(0, rounds))
+    known_anchors = (
+        {} if anchors is None else {e.id: e.T_frame_tag() for e in load_tag_map(anchors)}
+    )
+    rounds = (
+        {} if calibrate_odometry is None else {"calibration_rounds": max(0, calibrate_odometry)}
+    )
     with Progress(transient=True) as bar:
         task = bar.add_task("mapping", total=1.0)
 
@@ -215,9 +225,11 @@ def map_build(
 
             sim_world = load_world(world) if world is not None else load_default_world()
             drive = simulate_drive(sim_world, seed=seed)
+            observation_config = ObservationConfig(seed=seed)
+            config = sim_build_config(drive, observation_config).model_copy(update=rounds)
             tag_map, qa = build_map_from_drive(
                 drive,
-                ObservationConfig(seed=seed),
+                observation_config,
                 anchors=anchor or None,
                 config=config,
                 camera_stride=camera_stride,
@@ -240,8 +252,7 @@ def map_build(
                 tag_size,
                 sizes,
             )
-            if anchors is not None:
-                known.update({e.id: e.T_frame_tag() for e in load_tag_map(anchors)})
+            known.update(known_anchors)
             chosen = anchor or sorted(known)
             missing = [i for i in chosen if i not in known]
             if missing and len(chosen) > 1:
@@ -250,6 +261,7 @@ def map_build(
                 )
             # one anchor without a known pose defines the map frame (identity pose)
             T_map_anchor = {i: known.get(i, SE3.identity()) for i in chosen}
+            config = MapBuildConfig(**rounds)
             tag_map, qa = build_tag_map(survey, T_map_anchor, config, progress)
     save_tag_map(tag_map, out)
     if report is not None:

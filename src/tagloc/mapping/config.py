@@ -22,7 +22,7 @@ class OdometryNoise(BaseModel):
     they are what the dupont VIO map uses. Where the odometry's random walk is known, give it
     and calibrate the systematic part (``MapBuildConfig.joint_calibration``): the simulator's
     builder does (:func:`tagloc.mapping.sim_survey.odometry_noise_of`), and on 12 simulated
-    legged drives that beat these defaults, 7.6 cm tag RMS against 9.9 cm.
+    legged drives that beat these defaults, 7.6 cm tag RMS against 9.8 cm.
     """
 
     model_config = ConfigDict(extra="forbid", frozen=True)
@@ -60,10 +60,10 @@ class MapBuildConfig(BaseModel):
         Huber threshold on odometry factors (None: Gaussian). Huber, not Cauchy: a redescending
         kernel lets the trajectory tear where false detections pull. The dupont VIO has
         one-frame jumps of up to 0.25 m; its maps from the left and from the right camera alone
-        disagree by (median, max) 182 mm, 400 mm with Huber(3) (39 outliers of 3,634), 98 mm,
-        174 mm with Huber(10) (61 outliers), 101 mm, 185 mm Gaussian (73): Huber(3) bends the
-        trajectory at every slightly off step. Default 10; the simulator's builder uses None
-        (its odometry has no jumps).
+        disagree by (median, max) 182 mm, 399 mm with Huber(3) (27 outliers of 3,634), 101 mm,
+        191 mm with Huber(10) (56 outliers), 101 mm, 182 mm Gaussian (73): Huber(3) bends the
+        trajectory at every slightly off step. Default 10; the simulator's builder uses 3 (with
+        the exact random-walk model, for the legged odometry's foot slips).
     max_range_m : float
         Observations of tags farther than this are not used (depth error grows ~ range^2).
     max_ambiguity_for_init : float
@@ -97,7 +97,7 @@ class MapBuildConfig(BaseModel):
         (two drives); over 12 drives tag RMS 7.6 cm against 7.8 cm, and 7.5 cm with no
         systematic error at all.
         Default off: on the dupont VIO it made the left and right maps disagree more (median
-        149 mm against 98 mm).
+        152 mm against 101 mm).
     calibration_sigma : float
         Standard deviation of the zero-mean prior on each calibration number (fractions for
         the scales, rad/m for the yaw bias).
