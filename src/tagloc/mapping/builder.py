@@ -49,7 +49,6 @@ from tagloc.mapping.calibration import (
     fit_calibration,
 )
 from tagloc.mapping.config import MapBuildConfig
-from tagloc.mapping.flips import flip_stuck_tags
 from tagloc.mapping.graph import (
     GraphInput,
     GraphSolution,
@@ -64,7 +63,7 @@ from tagloc.mapping.initialize import (
     inverse_h,
 )
 from tagloc.mapping.observations import Observations, collect_observations
-from tagloc.mapping.refine import State, refine_with_corners
+from tagloc.mapping.refine import State, refine_and_test_tilts
 from tagloc.mapping.report import BuildReport, TagQA, reprojection_residuals, rms
 from tagloc.mapping.survey import MappingError, Survey, TagKey
 from tagloc.tags.tagmap import DEFAULT_FAMILY, TagEntry, TagMap
@@ -73,8 +72,6 @@ logger = logging.getLogger(__name__)
 
 #: ``progress(stage, done, total)``; stages ``"pnp"``, ``"optimize"``.
 ProgressFn = Callable[[str, int, int], None]
-#: Corner refinements after which stuck tilts are tested and flipped (then refined again).
-MAX_FLIP_PASSES = 2
 Anchors = Mapping[int, SE3] | Mapping[TagKey, SE3]
 
 
@@ -195,26 +192,13 @@ def build_tag_map(
     ambiguous: list[int] = []
     held = M_anchor or {int(obs.tag[0]): M_map_tag[int(obs.tag[0])]}
     state = State(M_map_base, M_map_tag, calibration_vector(calibration))
-    for pass_ in range(MAX_FLIP_PASSES + 1 if config.factors == "corners" else 0):
-        solution, state = refine_with_corners(
-            obs, M_odom_raw, state, held, survey.cameras, survey.T_base_cam, config,
-            config.joint_calibration,
-        )  # fmt: skip
+    if config.factors == "corners":
+        solution, state, ambiguous = refine_and_test_tilts(
+            obs, M_odom_raw, state, held, set(M_anchor), survey.cameras, survey.T_base_cam, config
+        )
         iterations += solution.iterations
         optimize_s += solution.optimize_s
-        if pass_ == MAX_FLIP_PASSES:
-            break
-        M_map_tag, flipped, ambiguous = flip_stuck_tags(
-            obs, state.M_map_base, state.M_map_tag, set(M_anchor), survey.cameras,
-            survey.T_base_cam, config.pnp_noise.sigma_px,
-        )  # fmt: skip
-        logger.info("corner refinement: flipped tags %s", [obs.tag_keys[j][1] for j in flipped])
-        if not flipped:
-            break
-        state = State(state.M_map_base, M_map_tag, state.c)
-    if config.factors == "corners":
-        calibration = calibration_from_vector(state.c)
-        logger.info("odometry calibration after the refinement: %s", calibration)
+        logger.info("odometry calibration: %s", calibration_from_vector(state.c))
     if progress is not None:
         progress("optimize", config.rounds, config.rounds)
     timings["corner_refinement"] = time.perf_counter() - t_refine

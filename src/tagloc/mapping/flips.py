@@ -3,9 +3,11 @@
 A tag seen only near face-on and far away has two tilts that each fit every single view (the
 IPPE ambiguity, the normal mirrored about the line of sight); when most views start on the wrong
 one, the joint optimum stays there (measured on the simulated office with perfect odometry:
-3 of 37 tags at 18-22 degrees, although the true tilt fits their corners better by a
-log-likelihood of 14-20). A tag whose initialization came from drifted keyframes can even be
-off by more than 90 degrees. So after the corner refinement, each tag is tested:
+tags 14, 16 and 24 at 18-22 degrees, although the true tilt fits their corners better by a
+log-likelihood of 14-20, at 0.5 px assumed noise). A tag initialized from drifted keyframes
+can be off by more than that: tag 0 of the one-loop survey, seen only on the way back after
+190 m, started 135 degrees off, and the robust kernels rejected its views (32 outliers) until
+this test. So after the corner refinement, each tag is tested:
 
 1. candidate rotations: the current one; the consensus of its observations' implied rotations
    at the optimized keyframes, either IPPE branch

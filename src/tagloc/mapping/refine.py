@@ -19,9 +19,10 @@ the calibration's uncertainty included.
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import gtsam
 import numpy as np
@@ -37,6 +38,7 @@ from tagloc.mapping.corner_graph import (
     corner_jacobians,
     linearize_corners,
 )
+from tagloc.mapping.flips import flip_stuck_tags
 from tagloc.mapping.graph import GraphSolution, L, X, odometry_sigmas
 from tagloc.mapping.initialize import inverse_h, rotation_angle
 from tagloc.mapping.observations import Observations
@@ -46,12 +48,15 @@ from tagloc.mapping.odometry_factors import (
     prior_residuals,
 )
 
+logger = logging.getLogger(__name__)
 FloatArray = npt.NDArray[np.float64]
 #: Stop when no tag moves more than this (m) or turns more than this (rad) in a round.
 STEP_TOL_M, STEP_TOL_RAD = 1e-4, 1e-4
 #: Key of the odometry calibration vector.
 CAL = int(gtsam.symbol("c", 0))
 _LINE_SEARCH_STEPS = 6
+#: Corner refinements after which stuck tilts are tested and flipped (then refined again).
+MAX_FLIP_PASSES = 2
 
 
 @dataclass(frozen=True, slots=True)
@@ -240,3 +245,40 @@ def refine_with_corners(
         linear=graph,
     )
     return solution, state
+
+
+def refine_and_test_tilts(
+    obs: Observations,
+    M_odom_raw: FloatArray,
+    start: State,
+    held: Mapping[int, FloatArray],
+    fixed: set[int],
+    cameras: Mapping[str, CameraModel],
+    T_base_cam: Mapping[str, SE3],
+    config: MapBuildConfig,
+) -> tuple[GraphSolution, State, list[int]]:
+    """Refine, test every tag's tilt (:mod:`tagloc.mapping.flips`), refine again while tags
+    flip (at most :data:`MAX_FLIP_PASSES` tests).
+
+    ``fixed``: tags not tested (anchors). Returns the last solution (iterations and solver time
+    summed over the passes), its state, and the tags whose tilt is ambiguous.
+    """
+    state, rounds, solve_s = start, 0, 0.0
+    ambiguous: list[int] = []
+    for pass_ in range(MAX_FLIP_PASSES + 1):
+        solution, state = refine_with_corners(
+            obs, M_odom_raw, state, held, cameras, T_base_cam, config, config.joint_calibration
+        )
+        rounds += solution.iterations
+        solve_s += solution.optimize_s
+        if pass_ == MAX_FLIP_PASSES:
+            break
+        M_map_tag, flipped, ambiguous = flip_stuck_tags(
+            obs, state.M_map_base, state.M_map_tag, fixed, cameras, T_base_cam,
+            config.pnp_noise.sigma_px,
+        )  # fmt: skip
+        logger.info("tilt test: flipped tags %s", [obs.tag_keys[j][1] for j in flipped])
+        if not flipped:
+            break
+        state = State(state.M_map_base, M_map_tag, state.c)
+    return replace(solution, iterations=rounds, optimize_s=solve_s), state, ambiguous
