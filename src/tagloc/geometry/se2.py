@@ -7,6 +7,7 @@ Tangent vectors ``[x, y, theta]``; right perturbation ``T (+) tau = T @ Exp(tau)
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import ClassVar, Literal, overload
@@ -158,6 +159,12 @@ class SE2(LieGroup):
 
     def to_se3(self) -> SE3:
         """The SE(3) pose ``(x, y, 0)`` rotated by ``theta`` about ``z``."""
+        if self.rotation_angle.ndim == 0:  # one pose: plain floats
+            c, s = math.cos(float(self.rotation_angle)), math.sin(float(self.rotation_angle))
+            x, y = self.translation.tolist()
+            return SE3._make(
+                np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), np.array([x, y, 0.0])
+            )
         matrix = np.zeros((*self.batch_shape, 3, 3))
         matrix[..., :2, :2] = rotation_2d(self.rotation_angle)
         matrix[..., 2, 2] = 1.0
@@ -196,6 +203,10 @@ class SE2(LieGroup):
 
     def adjoint(self) -> FloatArray:
         """``Ad = [[R, [y, -x]^T], [0, 1]]`` in ``[x, y, theta]`` order (Sola App. C)."""
+        if self.rotation_angle.ndim == 0:  # one pose: plain floats
+            c, s = math.cos(float(self.rotation_angle)), math.sin(float(self.rotation_angle))
+            x, y = self.translation.tolist()
+            return np.array([[c, -s, y], [s, c, -x], [0.0, 0.0, 1.0]])
         out = np.zeros((*self.batch_shape, 3, 3))
         out[..., :2, :2] = rotation_2d(self.rotation_angle)
         out[..., 0, 2] = self.translation[..., 1]
@@ -228,6 +239,14 @@ class SE2(LieGroup):
         return self._make(translation, theta)
 
     def _inverse(self) -> SE2:
+        if self.rotation_angle.ndim == 0:  # one pose: plain floats
+            angle = -float(self.rotation_angle)
+            ca, sa = math.cos(angle), math.sin(angle)
+            px, py = self.translation.tolist()
+            wrapped = (angle + math.pi) % (2.0 * math.pi) - math.pi
+            return self._make(
+                np.array([-(ca * px - sa * py), -(sa * px + ca * py)]), np.array(wrapped)
+            )
         theta = -self.rotation_angle
         t = self.translation
         c, s = np.cos(theta), np.sin(theta)

@@ -237,6 +237,7 @@ class MapOdomFilter:
         self._cap_ref: Pose | None = None  # published correction the current stamp caps from
         self._cap_stamp = -1
         self._step_ref: Pose | None = None  # published at the last predict() (odometry step)
+        self._history_last: Pose | None = None  # the correction last appended to the history
         self._gap = False
         self._ref_stamp, self._ref_odometer = 0, 0.0
 
@@ -437,7 +438,9 @@ class MapOdomFilter:
             odom = odom if odom is not None else self._lookup(stamp_ns)  # judged at the robot
             clipped = self._clip(self._step_ref, self._published, stamp_ns, odom)
             if clipped is not None:
-                self._set_published(clipped, stamp_ns)
+                self._published = clipped
+        if self._published is not self._history_last:  # drifted or clipped since published
+            self._set_published(self._published, stamp_ns)
         self._step_ref = self._published
 
     def update(self, fix: TagFix) -> FilterEvent:
@@ -735,7 +738,9 @@ class MapOdomFilter:
         if self._nc:
             self._X = self._drifted(self._require(), motion)
             if self._published is not None:
-                self._set_published(self._drifted(self._published, motion), stamp_ns)
+                # the published correction drifts too (appended to the history by predict()
+                # or the publication that follows, not once per update)
+                self._published = self._drifted(self._published, motion)
         self._stamp, self._A = stamp_ns, odom
         self._odometer_m += motion.distance_m
 
@@ -840,7 +845,7 @@ class MapOdomFilter:
     def _set_published(self, T_map_odom: Pose, stamp_ns: int) -> None:
         """Publish: the correction in force from ``stamp_ns`` (or the latest stamp published, if
         later: publications never go back in time) on."""
-        self._published = T_map_odom
+        self._published = self._history_last = T_map_odom
         last = self._history[-1].stamp_ns if self._history else stamp_ns
         self._history.append(CorrectionUpdate(max(stamp_ns, last), self._lift(T_map_odom)))
 
