@@ -84,7 +84,7 @@ def bench_dupont() -> list[tuple[str, float, str]]:
             "Gauss-Newton rounds, linearized in numpy + tilt test",
         ),
         (
-            "dupont: of which in GTSAM",
+            "dupont: both, inside GTSAM",
             t["optimize"],
             f"LM + sparse solves ({report.iterations} iterations and rounds)",
         ),
