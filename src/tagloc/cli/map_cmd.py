@@ -150,6 +150,7 @@ def _bag_survey(
         if tag_size is not None
         else (rig.default_tag_size if rig else None),
         ignore_tags=rig.ignore_tags if rig else (),
+        tag_remaps=rig.tag_remaps if rig else (),
         source=str(bag),
     )
     return survey, dict(rig.anchors) if rig else {}

@@ -16,6 +16,7 @@ are off by 88, 178 and 91 degrees.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
@@ -27,7 +28,19 @@ from tagloc.config import parse_yaml_mapping
 from tagloc.geometry import SE3
 from tagloc.mapping.survey import CameraFrame, MappingError, Survey, TagKey
 from tagloc.messages import Message, OdometryMsg, TagDetectionsMsg
+from tagloc.tags.detection import TagDetection
 from tagloc.tags.pnp import estimate_tag_poses
+
+
+@dataclass(frozen=True, slots=True)
+class TagRemap:
+    """Detections of ``tag_id`` stamped in ``[start_ns, end_ns]`` are of another physical tag
+    with the same printed id: they are mapped as ``remap_id`` (tagSLAM's ``tag_id_remap``)."""
+
+    tag_id: int
+    remap_id: int
+    start_ns: int
+    end_ns: int
 
 
 @dataclass(frozen=True, slots=True)
@@ -39,6 +52,7 @@ class RigConfig:
     ignore_tags: frozenset[int]
     default_tag_size: float | None
     tag_sizes: dict[int, float]
+    tag_remaps: tuple[TagRemap, ...] = ()
 
 
 def _pose(node: object, where: str) -> SE3:
@@ -91,7 +105,27 @@ def parse_tagslam(text: str, source: str) -> RigConfig:
         frozenset(ignore),
         None if default_size is None else float(default_size),
         sizes,
+        _tag_remaps(data.get("tag_id_remap") or [], f"{source}: tag_id_remap"),
     )
+
+
+def _tag_remaps(entries: object, where: str) -> tuple[TagRemap, ...]:
+    """tagSLAM's ``tag_id_remap: [{id, remaps: [{remap_id, start_time, end_time}]}]`` (times in
+    seconds since the epoch, as the bag's stamps)."""
+    if not isinstance(entries, list):
+        raise MappingError(f"{where}: expected a list")
+    out = []
+    for i, entry in enumerate(entries):
+        try:
+            for j, r in enumerate(entry["remaps"]):
+                start, end = round(float(r["start_time"]) * 1e9), round(float(r["end_time"]) * 1e9)
+                if end < start:
+                    raise MappingError(f"{where}[{i}].remaps[{j}]: end_time before start_time")
+                out.append(TagRemap(int(entry["id"]), int(r["remap_id"]), start, end))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise MappingError(f"{where}[{i}]: expected id and remaps of remap_id, start_time, "
+                               f"end_time ({exc.__class__.__name__}: {exc})") from None  # fmt: skip
+    return tuple(out)
 
 
 def survey_from_messages(
@@ -105,6 +139,7 @@ def survey_from_messages(
     tag_sizes: Mapping[TagKey, float] | None = None,
     default_tag_size: float | None = None,
     ignore_tags: Iterable[int] = (),
+    tag_remaps: Iterable[TagRemap] = (),
     source: str = "stream",
 ) -> Survey:
     """A survey from ``(topic, record)`` items.
@@ -117,6 +152,8 @@ def survey_from_messages(
         The :class:`OdometryMsg` topic; ``T_odom_base = T_parent_child @ T_child_base``.
     T_child_base : SE3, optional
         The base in the odometry's child frame (tagSLAM's ``T_body_odom`` inverted).
+    tag_remaps : iterable of TagRemap
+        Detections re-labelled by stamp (a printed id used twice in the building).
 
     Raises
     ------
@@ -126,12 +163,14 @@ def survey_from_messages(
     stamps: list[int] = []
     poses: list[SE3] = []
     frames: list[CameraFrame] = []
+    remaps = tuple(tag_remaps)
     for topic, msg in items:
         if topic == odom_topic and isinstance(msg, OdometryMsg):
             stamps.append(msg.stamp_ns)
             poses.append(msg.T_parent_child)
         elif topic in camera_topics and isinstance(msg, TagDetectionsMsg):
-            frames.append(CameraFrame(msg.stamp_ns, camera_topics[topic], msg.detections))
+            detections = tuple(_remapped(d, msg.stamp_ns, remaps) for d in msg.detections)
+            frames.append(CameraFrame(msg.stamp_ns, camera_topics[topic], detections))
     if len(stamps) < 2:
         raise MappingError(
             f"{source}: no odometry on topic {odom_topic!r} (found {len(stamps)} messages)"
@@ -151,6 +190,13 @@ def survey_from_messages(
         ignore_tags=frozenset(int(i) for i in ignore_tags),
         source=source,
     )
+
+
+def _remapped(det: TagDetection, stamp_ns: int, remaps: tuple[TagRemap, ...]) -> TagDetection:
+    for r in remaps:
+        if det.tag_id == r.tag_id and r.start_ns <= stamp_ns <= r.end_ns:
+            return dataclasses.replace(det, tag_id=r.remap_id)
+    return det
 
 
 def corner_rotation_by_gravity(
