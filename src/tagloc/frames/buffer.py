@@ -68,6 +68,7 @@ class TransformBuffer:
         self._edges: dict[str, Edge] = {}  # keyed by child frame
         self._frames: set[str] = set()
         self._plans: dict[tuple[str, str], Plan] = {}
+        self._revision = 0
 
     # ----- properties ------------------------------------------------------------------------
     @property
@@ -84,6 +85,12 @@ class TransformBuffer:
     def frames(self) -> tuple[str, ...]:
         """Every frame named by an edge, sorted."""
         return tuple(sorted(self._frames))
+
+    @property
+    def revision(self) -> int:
+        """Counts the calls that may change the buffer (every insert and static edge): a
+        lookup's result stays valid while it is unchanged (for callers that cache lookups)."""
+        return self._revision
 
     @property
     def nbytes(self) -> int:
@@ -111,6 +118,7 @@ class TransformBuffer:
         StaleSampleError
             If ``stamp_ns`` is older than the edge's newest stamp minus the window.
         """
+        self._revision += 1
         stamp = _validate.stamp(stamp_ns)
         values = _validate.single_pose(T_parent_child, parent, child)
         sample = [*_kernels.quat_from_matrix(values[:9]), *values[9:]]
@@ -139,6 +147,7 @@ class TransformBuffer:
         ------
         As :meth:`set_transform`; the :class:`StaleSampleError` names the first stale sample.
         """
+        self._revision += 1
         stamps = _validate.stamps(stamps_ns)
         poses = _validate.pose_batch(T_parent_child, len(stamps), parent, child)
         quats = np.reshape(poses.rotation.as_quat(), (-1, 4))
@@ -161,6 +170,7 @@ class TransformBuffer:
         GeometryError, FrameTreeError
             As :meth:`set_transform` (here: an edge that is dynamic already).
         """
+        self._revision += 1
         values = _validate.single_pose(T_parent_child, parent, child)
         value: _kernels.Rt = tuple(values)  # type: ignore[assignment]
         edge = self._edges.get(child)

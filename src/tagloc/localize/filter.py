@@ -99,9 +99,25 @@ def _ad(tau: FloatArray) -> FloatArray:
     ])  # fmt: skip
 
 
+def _se2_series(tau: FloatArray, c1: float, c2: float, c3: float, c4: float) -> FloatArray:
+    """``I + c1 ad + c2 ad^2 + c3 ad^3 + c4 ad^4`` for se(2) ``[x, y, theta]`` on plain floats:
+    ``ad^2 = [[-t^2, 0, t x], [0, -t^2, t y], 0]``, ``ad^3 = -t^2 ad``, ``ad^4 = -t^2 ad^2``."""
+    x, y, t = tau.tolist()
+    t2 = t * t
+    a = c1 - c3 * t2  # coefficient of ad (ad^3 folded in)
+    b = c2 - c4 * t2  # coefficient of ad^2 (ad^4 folded in)
+    return np.array([
+        [1.0 - b * t2, -a * t, a * y + b * t * x],
+        [a * t, 1.0 - b * t2, -a * x + b * t * y],
+        [0.0, 0.0, 1.0],
+    ])  # fmt: skip
+
+
 def _jr(tau: FloatArray) -> FloatArray:
     """Right Jacobian ``Jr(tau) = sum_k (-ad)^k / (k+1)!`` (series to ``ad^4`` when small)."""
     if float(np.abs(tau).sum()) < _SERIES_BELOW:
+        if len(tau) == 3:
+            return _se2_series(tau, -0.5, 1.0 / 6.0, -1.0 / 24.0, 1.0 / 120.0)
         a = _ad(tau)
         a2 = a @ a
         return np.eye(len(tau)) - 0.5 * a + a2 / 6.0 - a2 @ a / 24.0 + a2 @ a2 / 120.0
@@ -112,6 +128,8 @@ def _jr_inv(tau: FloatArray) -> FloatArray:
     """``Jr^-1(tau) = I + ad/2 + ad^2/12 - ad^4/720 + ...`` (Bernoulli numbers; series when
     small)."""
     if float(np.abs(tau).sum()) < _SERIES_BELOW:
+        if len(tau) == 3:
+            return _se2_series(tau, 0.5, 1.0 / 12.0, 0.0, -1.0 / 720.0)
         a = _ad(tau)
         a2 = a @ a
         return np.eye(len(tau)) + 0.5 * a + a2 / 12.0 - a2 @ a2 / 720.0
@@ -238,6 +256,7 @@ class MapOdomFilter:
         self._cap_stamp = -1
         self._step_ref: Pose | None = None  # published at the last predict() (odometry step)
         self._history_last: Pose | None = None  # the correction last appended to the history
+        self._looked_up: tuple[tuple[int, int], SE3] | None = None  # (stamp, revision), value
         self._gap = False
         self._ref_stamp, self._ref_odometer = 0, 0.0
 
@@ -387,6 +406,23 @@ class MapOdomFilter:
         return PoseWithCovariance(
             stamp_ns, self.map_frame, self.base_frame, self._lift(X) @ A3, 0.5 * (cov + cov.T)
         )
+
+    def T_map_base_at(self, stamp_ns: int) -> SE3:
+        """``T_map_base`` at ``stamp_ns`` from the estimate, without its covariance (what a
+        fix source needs as a prior; cheaper than :meth:`pose_at`).
+
+        Raises
+        ------
+        LocalizeError
+            Before initialization.
+        TransformLookupError
+            If the odometry at ``stamp_ns`` is not buffered.
+        """
+        X = self._require()
+        A3 = self._lookup(stamp_ns)
+        if self._nc and stamp_ns != self._stamp:
+            X = self._drifted(X, self._path(self._stamp, stamp_ns, self._A, A3))
+        return self._lift(X) @ A3
 
     # ----- inputs ----------------------------------------------------------------------------
     def initialize(self, stamp_ns: int, T_map_odom: SE3, cov: FloatArray) -> FilterEvent:
@@ -642,7 +678,14 @@ class MapOdomFilter:
         return self._X
 
     def _lookup(self, stamp_ns: int) -> SE3:
-        return self._buffer.lookup(self.odom_frame, self.base_frame, stamp_ns)
+        """``T_odom_base`` at ``stamp_ns``; the last one is reused while the buffer is unchanged
+        (a frame's prior and its fixes look up the same stamp)."""
+        key = (stamp_ns, self._buffer.revision)
+        if self._looked_up is not None and self._looked_up[0] == key:
+            return self._looked_up[1]
+        odom = self._buffer.lookup(self.odom_frame, self.base_frame, stamp_ns)
+        self._looked_up = (key, odom)
+        return odom
 
     def _lift(self, X: Pose) -> SE3:
         return X.to_se3() if isinstance(X, SE2) else X
@@ -781,7 +824,13 @@ class MapOdomFilter:
         if u is None or not u.any():  # the fix is at the state's stamp (or no calibration)
             nu = cand.z.minus(X @ cand.A)  # type: ignore[operator, arg-type]
             H_f = _jr_inv(-nu) @ cand.Ad_A_inv
-            return nu, (np.hstack([H_f, H_f @ M]) if self._nc else H_f)
+            if not self._nc:
+                return nu, H_f
+            H = np.zeros((self.dof, self._n))
+            H[:, : self.dof] = H_f
+            if M.any():  # c = 0 (before any calibration) on a late fix
+                H[:, self.dof :] = H_f @ M
+            return nu, H
         E, Jr_u = type(X).exp(u, jacobians=True)
         nu = cand.z.minus(X @ E @ cand.A)  # type: ignore[operator, arg-type]
         H_f = _jr_inv(-nu) @ cand.Ad_A_inv
@@ -818,8 +867,9 @@ class MapOdomFilter:
         P = Jd @ (IKH @ Pi @ IKH.T + K @ R @ K.T) @ Jd.T  # Joseph form, then the reset
         # Plus the walk since the fix's stamp when the gain used P - Q_back (the walk's
         # covariance, Ad(A) Q Ad(A)^T, does not depend on X: no reset for it).
-        P = P + (self._P - P0)
-        if self._calib is not None:
+        if P0 is not self._P:
+            P = P + (self._P - P0)
+        if self._calib is not None and (np.abs(c_new) > self._calib.max_abs).any():
             c_new = np.clip(c_new, -self._calib.max_abs, self._calib.max_abs)
         return X_new, c_new, 0.5 * (P + P.T)
 

@@ -151,20 +151,21 @@ class ProcessNoise:
         cos = 0.5 * (float(np.vdot(R0, R1)) - 1.0)  # trace(R0^T R1) = sum(R0 * R1)
         angle = math.acos(min(1.0, max(-1.0, cos)))
         var = dist * self.var_per_m + angle * self.var_per_rad + (dt_ns / S_NS) * self.var_per_s
+        bx, by, bz = (R0.T @ d).tolist()  # the increment in the base frame at its start
+        dyaw = math.atan2(float(R0[:, 1] @ R1[:, 0]), float(R0[:, 0] @ R1[:, 0]))
         if planar:
             c, s = R1[0, 0], R1[1, 0]
             n = math.hypot(c, s)
             Ad = np.array([[c / n, -s / n, t1[1]], [s / n, c / n, -t1[0]], [0.0, 0.0, 1.0]])
+            G = np.array([[bx, 0.0, 0.0, 0.0], [by, dist, 0.0, 0.0], [0.0, 0.0, dist, dyaw]])
         else:
             x, y, z = t1.tolist()
             Ad = np.zeros((6, 6))
             Ad[:3, :3] = Ad[3:, 3:] = R1
             Ad[:3, 3:] = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]]) @ R1
-        d_base = R0.T @ d
-        dR10, dR00 = float(R0[:, 1] @ R1[:, 0]), float(R0[:, 0] @ R1[:, 0])
-        G = calibration_jacobians(
-            d_base[None], np.array([dist]), np.array([math.atan2(dR10, dR00)]), planar
-        )[0]
+            G = np.zeros((6, N_CALIBRATION))
+            G[0, 0], G[1, 0], G[2, 0], G[1, 1] = bx, by, bz, dist
+            G[5, 2], G[5, 3] = dist, dyaw
         return PathMotion((Ad * var) @ Ad.T, dist, Ad @ G)
 
 

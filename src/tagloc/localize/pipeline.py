@@ -286,7 +286,7 @@ class LocalizationPipeline:
         prior = None
         if self.filter.initialized:
             try:
-                prior = self.filter.pose_at(frame.stamp_ns).T_map_base
+                prior = self.filter.T_map_base_at(frame.stamp_ns)
             except TransformLookupError:
                 prior = None
         result = source.frame_fixes(frame.stamp_ns, frame.detections, prior, flags)
