@@ -268,3 +268,16 @@ def test_process_noise_one_increment_equals_the_path_integral(planar: bool) -> N
     angle = np.linalg.norm((A0.rotation.inverse() @ A1.rotation).log())
     var = d_one * noise.var_per_m + angle * noise.var_per_rad + 0.05 * noise.var_per_s
     np.testing.assert_allclose(Q_one, Ad @ np.diag(var) @ Ad.T, rtol=1e-10)
+
+
+def test_odometry_lookups_are_reused_only_while_the_buffer_is_unchanged() -> None:
+    buffer = TransformBuffer()
+    buffer.set_transforms("odom", "base_link", np.array([0, 2 * S]), SE3.identity(2))
+    flt = make_filter(buffer)
+    revision = buffer.revision
+    first = flt._lookup(S)
+    assert flt._lookup(S) is first and buffer.revision == revision
+    # a late sample between the two changes the interpolation at 1 s: looked up again
+    buffer.set_transform("odom", "base_link", S, SE3.from_rotvec([0, 0, 0], [1.0, 0, 0]))
+    assert buffer.revision == revision + 1
+    np.testing.assert_allclose(flt._lookup(S).translation, [1.0, 0.0, 0.0])
