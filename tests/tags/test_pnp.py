@@ -14,6 +14,7 @@ import numpy.typing as npt
 import pytest
 
 from tagloc.camera import PinholeRadtan
+from tagloc.eval.tag_views import sample_wall_view
 from tagloc.geometry import SE3, SO3
 from tagloc.tags.covariance import NoiseModel
 from tagloc.tags.detection import TagDetection, tag_object_points
@@ -46,44 +47,14 @@ CAMERA_DISTORTED = PinholeRadtan(
     k3=0.0,
 )
 SIZE = 0.16
-UP_LEVEL_CAM = np.array([0.0, -1.0, 0.0])  # map up in a level camera's optical frame
-
-
-#: Optical axes of a level camera in a map with z up: x right = map x, y down = -map z,
-#: z forward = map y.
-R_MAP_LEVEL = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 
 
 def wall_view(
     distance: float, angle_rad: float, rng: np.random.Generator, tilt_deg: float = 1.0
 ) -> tuple[SE3, SE3]:
-    """An upright tag on a vertical wall seen by a nearly level camera at the map origin.
-
-    The tag center is at ``distance`` along a ray up to 25 deg off-axis horizontally and up to
-    ``min(15 deg, angle)`` vertically; the tag normal is horizontal and makes ``angle_rad`` with
-    the ray to the camera; the camera is tilted (robot roll/pitch) by ``N(0, tilt_deg)``.
-
-    Returns
-    -------
-    T_cam_tag, T_map_cam : SE3
-        The map has z up; ``T_map_tag = T_map_cam @ T_cam_tag`` has its y axis up.
-    """
-    el = np.deg2rad(rng.uniform(-1.0, 1.0) * min(15.0, np.rad2deg(angle_rad)))
-    az = np.deg2rad(rng.uniform(-25.0, 25.0))
-    ray = np.array([np.sin(az) * np.cos(el), -np.sin(el), np.cos(az) * np.cos(el)])
-    psi = np.arccos(np.clip(np.cos(angle_rad) / np.cos(el), -1.0, 1.0)) * rng.choice([-1, 1])
-    h = -np.array([ray[0], 0.0, ray[2]]) / np.hypot(ray[0], ray[2])
-    c, s = np.cos(psi), np.sin(psi)
-    normal = np.array([c * h[0] + s * h[2], 0.0, -s * h[0] + c * h[2]])
-    R_level_tag = np.stack([np.cross(UP_LEVEL_CAM, normal), UP_LEVEL_CAM, normal], axis=1)
-    tilt = np.deg2rad(tilt_deg) * rng.normal(size=3) * np.array([1.0, 0.0, 1.0])
-    R_cam_level = SO3.from_rotvec(tilt).matrix
-    T_cam_tag = SE3(
-        rotation=SO3.from_matrix(R_cam_level @ R_level_tag),
-        translation=R_cam_level @ (distance * ray),
-    )
-    T_map_cam = SE3(rotation=SO3.from_matrix(R_MAP_LEVEL @ R_cam_level.T), translation=np.zeros(3))
-    return T_cam_tag, T_map_cam
+    """An upright tag on a vertical wall seen by a nearly level camera at the map origin
+    (:func:`tagloc.eval.tag_views.sample_wall_view`, which the rendered sweep uses too)."""
+    return sample_wall_view(distance, angle_rad, rng, tilt_deg)
 
 
 def simulate_corners(
