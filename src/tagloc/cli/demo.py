@@ -191,8 +191,10 @@ def _table(
         ),
         ("false fixes accepted", str(fused.false_fixes_accepted or 0)),
         ("largest correction jump", f"{fused.largest_jump_m:.3f} m (cap {cap:g} m per step)"),
-        ("checks", "all pass" if all(s.passed for s in summaries.values()) else "FAILED"),
     ]
+    for name, s in summaries.items():
+        failed = [c.name.split(" (")[0] for c in s.checks if c.passed is False]
+        rows.append((f"checks, {name}", "all pass" if not failed else "FAIL: " + "; ".join(failed)))
     calibration = run.metadata.get("odometry_calibration")
     if isinstance(calibration, dict):
         scale = calibration["scale"]["value"] * 100
