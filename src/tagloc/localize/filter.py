@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import logging
 import math
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -48,11 +47,9 @@ from tagloc.frames import TransformBuffer
 from tagloc.geometry import (
     SE2,
     SE3,
-    se2_right_jacobian,
-    se2_right_jacobian_inv,
-    se3_right_jacobian,
-    se3_right_jacobian_inv,
 )
+from tagloc.localize._series import jr as _jr
+from tagloc.localize._series import jr_inv as _jr_inv
 from tagloc.localize.config import LocalizerConfig
 from tagloc.localize.events import EventKind, EventLog, FilterEvent
 from tagloc.localize.fix import (
@@ -80,60 +77,11 @@ from tagloc.localize.motion import (
     PathMotion,
     ProcessNoise,
 )
+from tagloc.localize.publisher import CorrectionPublisher
 
 logger = logging.getLogger(__name__)
 S_NS = 1_000_000_000
 PLANAR_AXES = [0, 1, 5]  # x, y, rz of [x, y, z, rx, ry, rz]
-_SERIES_BELOW = 0.3  # sum |tau_i| under which Jr, Jr^-1 use their series (error < 1e-6)
-
-
-def _ad(tau: FloatArray) -> FloatArray:
-    """Small adjoint ``ad(tau)`` of se(3) ``[rho, phi]`` or se(2) ``[x, y, theta]``."""
-    if len(tau) == 3:
-        x, y, th = tau.tolist()
-        return np.array([[0.0, -th, y], [th, 0.0, -x], [0.0, 0.0, 0.0]])
-    a, b, c, d, e, f = tau.tolist()  # [[phi^, rho^], [0, phi^]]
-    return np.array([
-        [0.0, -f, e, 0.0, -c, b], [f, 0.0, -d, c, 0.0, -a], [-e, d, 0.0, -b, a, 0.0],
-        [0.0, 0.0, 0.0, 0.0, -f, e], [0.0, 0.0, 0.0, f, 0.0, -d], [0.0, 0.0, 0.0, -e, d, 0.0],
-    ])  # fmt: skip
-
-
-def _se2_series(tau: FloatArray, c1: float, c2: float, c3: float, c4: float) -> FloatArray:
-    """``I + c1 ad + c2 ad^2 + c3 ad^3 + c4 ad^4`` for se(2) ``[x, y, theta]`` on plain floats:
-    ``ad^2 = [[-t^2, 0, t x], [0, -t^2, t y], 0]``, ``ad^3 = -t^2 ad``, ``ad^4 = -t^2 ad^2``."""
-    x, y, t = tau.tolist()
-    t2 = t * t
-    a = c1 - c3 * t2  # coefficient of ad (ad^3 folded in)
-    b = c2 - c4 * t2  # coefficient of ad^2 (ad^4 folded in)
-    return np.array([
-        [1.0 - b * t2, -a * t, a * y + b * t * x],
-        [a * t, 1.0 - b * t2, -a * x + b * t * y],
-        [0.0, 0.0, 1.0],
-    ])  # fmt: skip
-
-
-def _jr(tau: FloatArray) -> FloatArray:
-    """Right Jacobian ``Jr(tau) = sum_k (-ad)^k / (k+1)!`` (series to ``ad^4`` when small)."""
-    if float(np.abs(tau).sum()) < _SERIES_BELOW:
-        if len(tau) == 3:
-            return _se2_series(tau, -0.5, 1.0 / 6.0, -1.0 / 24.0, 1.0 / 120.0)
-        a = _ad(tau)
-        a2 = a @ a
-        return np.eye(len(tau)) - 0.5 * a + a2 / 6.0 - a2 @ a / 24.0 + a2 @ a2 / 120.0
-    return se2_right_jacobian(tau) if len(tau) == 3 else se3_right_jacobian(tau)
-
-
-def _jr_inv(tau: FloatArray) -> FloatArray:
-    """``Jr^-1(tau) = I + ad/2 + ad^2/12 - ad^4/720 + ...`` (Bernoulli numbers; series when
-    small)."""
-    if float(np.abs(tau).sum()) < _SERIES_BELOW:
-        if len(tau) == 3:
-            return _se2_series(tau, 0.5, 1.0 / 12.0, 0.0, -1.0 / 720.0)
-        a = _ad(tau)
-        a2 = a @ a
-        return np.eye(len(tau)) + 0.5 * a + a2 / 12.0 - a2 @ a2 / 720.0
-    return se2_right_jacobian_inv(tau) if len(tau) == 3 else se3_right_jacobian_inv(tau)
 
 
 __all__ = ["MapOdomFilter", "ProcessNoise"]
@@ -242,7 +190,7 @@ class MapOdomFilter:
         self._batch: tuple[tuple[TagFix, EventKind], ...] = ()
         self.batch_serial = 0
         self.events = EventLog(max_events)
-        self._history: deque[CorrectionUpdate] = deque(maxlen=history_size)
+        self._out = CorrectionPublisher(cap, history_size, planar, self._capped)
         self._X: Pose | None = None
         self._c = np.zeros(self._nc)  # odometry calibration (module motion)
         self._P = np.zeros((self._n, self._n))  # [pose tangent, calibration]
@@ -251,11 +199,6 @@ class MapOdomFilter:
         self._stamp = self._updated_ns = 0  # predicted to; last fix applied at
         self._A = SE3.identity()  # T_odom_base at the state's stamp
         self._odometer_m = 0.0
-        self._published: Pose | None = None
-        self._cap_ref: Pose | None = None  # published correction the current stamp caps from
-        self._cap_stamp = -1
-        self._step_ref: Pose | None = None  # published at the last predict() (odometry step)
-        self._history_last: Pose | None = None  # the correction last appended to the history
         self._looked_up: tuple[tuple[int, int], SE3] | None = None  # (stamp, revision), value
         self._gap = False
         self._ref_stamp, self._ref_odometer = 0, 0.0
@@ -347,7 +290,7 @@ class MapOdomFilter:
     @property
     def corrections(self) -> tuple[CorrectionUpdate, ...]:
         """Published ``map -> odom`` corrections (stamps non-decreasing), oldest first."""
-        return tuple(self._history)
+        return self._out.history
 
     @property
     def suspect_sources(self) -> tuple[str, ...]:
@@ -374,11 +317,7 @@ class MapOdomFilter:
         LocalizeError
             Before the first (kept) published correction.
         """
-        for correction in reversed(self._history):  # queries are mostly recent
-            if correction.stamp_ns <= stamp_ns:
-                return correction.T_map_odom
-        first = f"the first is at {self._history[0].stamp_ns} ns" if self._history else "none yet"
-        raise LocalizeError(f"no map -> odom correction at {stamp_ns} ns ({first})")
+        return self._out.correction_at(stamp_ns)
 
     def pose_at(self, stamp_ns: int, *, published: bool = False) -> PoseWithCovariance:
         """``T_map_base = T_map_odom @ T_odom_base(stamp_ns)`` with covariance.
@@ -398,8 +337,8 @@ class MapOdomFilter:
         A3 = self._lookup(stamp_ns)
         motion = self._path(self._stamp, stamp_ns, self._A, A3)
         P = self._predicted(self._P, motion)[: self.dof, : self.dof]
-        if published and self._published is not None:
-            X = self._published
+        if published and self._out.current is not None:
+            X = self._out.current
         X = self._drifted(X, motion)
         J = A3.inverse().adjoint()
         cov = J @ self._embed(P) @ J.T
@@ -464,20 +403,9 @@ class MapOdomFilter:
         """
         if self._X is None:
             return
-        odom = None
         if stamp_ns - self._stamp >= self._noise.step_ns:
-            odom = self._lookup(stamp_ns)
-            self._advance(stamp_ns, odom)
-        if self._published is None:
-            return
-        if self._step_ref is not None and self._step_ref is not self._published:
-            odom = odom if odom is not None else self._lookup(stamp_ns)  # judged at the robot
-            clipped = self._clip(self._step_ref, self._published, stamp_ns, odom)
-            if clipped is not None:
-                self._published = clipped
-        if self._published is not self._history_last:  # drifted or clipped since published
-            self._set_published(self._published, stamp_ns)
-        self._step_ref = self._published
+            self._advance(stamp_ns, self._lookup(stamp_ns))
+        self._out.end_step(stamp_ns, lambda: self._lookup(stamp_ns))  # judged at the robot
 
     def update(self, fix: TagFix) -> FilterEvent:
         """Decide on one fix and apply it if it passes; return the decision event.
@@ -654,7 +582,7 @@ class MapOdomFilter:
             self._stamp, kind, sources,
             detail=f"from {len(found)} consistent fixes; T_map_odom t = {np.round(t, 3)}",
         )  # fmt: skip
-        snap = self._cap.snap_on_initialize or self._published is None
+        snap = self._cap.snap_on_initialize or self._out.current is None
         self._publish(self._stamp, snap=snap)
 
     def _reset_state(self, stamp_ns: int, odom: SE3, X: Pose, P: FloatArray) -> None:
@@ -780,10 +708,10 @@ class MapOdomFilter:
         self._P = self._predicted(self._P, motion)
         if self._nc:
             self._X = self._drifted(self._require(), motion)
-            if self._published is not None:
-                # the published correction drifts too (appended to the history by predict()
-                # or the publication that follows, not once per update)
-                self._published = self._drifted(self._published, motion)
+            if self._out.current is not None:
+                # the published correction drifts too (recorded by predict() or the
+                # publication that follows, not once per update)
+                self._out.drift(self._drifted(self._out.current, motion))
         self._stamp, self._A = stamp_ns, odom
         self._odometer_m += motion.distance_m
 
@@ -874,51 +802,12 @@ class MapOdomFilter:
         return X_new, c_new, 0.5 * (P + P.T)
 
     def _publish(self, stamp_ns: int, *, snap: bool) -> None:
-        """Publish ``T_map_odom`` moved toward the estimate by at most the cap per publication
-        stamp: the updates published at one stamp (the fixes of one frame, a batch applied after
-        a gap, late fixes published at the latest stamp) share one cap. (:meth:`predict` also
-        bounds what one odometry step publishes.) A snap, a declared (re)initialization,
-        publishes the estimate as it is."""
-        X = self._require()
-        new: Pose = X
-        last = self._history[-1].stamp_ns if self._history else stamp_ns
-        stamp = max(stamp_ns, last)
-        if self._published is not None and stamp != self._cap_stamp:
-            self._cap_ref, self._cap_stamp = self._published, stamp  # in force before `stamp`
-        if snap:  # later updates at this stamp, and the odometry step, cap from here
-            self._cap_ref, self._cap_stamp, self._step_ref = X, stamp, None
-        elif self._cap_ref is not None:
-            clipped = self._clip(self._cap_ref, X, stamp_ns, self._A)
-            new = X if clipped is None else clipped
-        self._set_published(new, stamp)
+        """Publish the estimate (:class:`~tagloc.localize.publisher.CorrectionPublisher`: moved
+        toward at most the cap per publication stamp and per odometry step, or snapped)."""
+        self._out.publish(self._require(), stamp_ns, self._A, snap=snap)
 
-    def _set_published(self, T_map_odom: Pose, stamp_ns: int) -> None:
-        """Publish: the correction in force from ``stamp_ns`` (or the latest stamp published, if
-        later: publications never go back in time) on."""
-        self._published = self._history_last = T_map_odom
-        last = self._history[-1].stamp_ns if self._history else stamp_ns
-        self._history.append(CorrectionUpdate(max(stamp_ns, last), self._lift(T_map_odom)))
-
-    def _clip(self, ref: Pose, target: Pose, stamp_ns: int, odom: SE3) -> Pose | None:
-        """``target`` moved back to within the cap of ``ref``, both seen at the robot's pose
-        ``odom`` (``T_odom_base``), or None if it is within already; logs a ``CAPPED`` event
-        with the remainder carried to later updates."""
-        A = odom.to_se2() if self.planar else odom
-        X_A = target @ A  # type: ignore[operator]
-        jump = (ref @ A).inverse() @ X_A  # type: ignore[operator]
-        step, clipped = self._cap.clip(jump)
-        if not clipped:
-            return None
-        # new @ A = ref @ A @ step, built from the target (no round-off build-up)
-        rest = step.inverse() @ jump  # type: ignore[operator]
-        angle = float(np.linalg.norm(rest.log()[2 if self.planar else 3 :]))
-        self._event(
-            stamp_ns, EventKind.CAPPED,
-            detail=f"remainder {np.linalg.norm(rest.translation):.3f} m, "
-            f"{math.degrees(angle):.2f} deg",
-        )  # fmt: skip
-        out: Pose = X_A @ rest.inverse() @ A.inverse()  # type: ignore[operator]
-        return out
+    def _capped(self, stamp_ns: int, detail: str) -> None:
+        self._event(stamp_ns, EventKind.CAPPED, detail=detail)
 
     def _event(
         self, stamp_ns: int, kind: EventKind, source: str = "", d2: float | None = None,
