@@ -16,7 +16,9 @@ from tagloc.tags.tagmap import load_tag_map
 
 def test_demo_surveys_localizes_and_writes_the_reports(tmp_path: Path) -> None:
     out = tmp_path / "out"
-    result = run_tagloc("demo", "--out", str(out), "--duration", "60")
+    result = run_tagloc(
+        "demo", "--out", str(out), "--duration", "60", "--anchor", "1", "--anchor", "12"
+    )
     assert result.returncode == 0, result.stderr
     png = (out / "drive.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 50_000
@@ -26,15 +28,22 @@ def test_demo_surveys_localizes_and_writes_the_reports(tmp_path: Path) -> None:
                   "fused ATE RMSE, true map", "largest correction jump"):  # fmt: skip
         assert words in result.stdout, words
     assert sorted(p.name for p in out.iterdir()) == [
-        "drive.png", "localize", "localize_true_map", "map", "world.yaml"
+        "drive.png",
+        "localize",
+        "localize_true_map",
+        "map",
+        "world.yaml",
     ]
     built = load_tag_map(out / "map" / "tags.yaml")
     assert len(built) == len(load_default_world().tags)
+    assert [e.id for e in built.anchors] == [1, 12]
+    assert "survey: anchor tags (true poses)" in result.stdout
     for run in ("localize", "localize_true_map"):
         summary = json.loads((out / run / "summary.json").read_text())
-        assert summary["estimators"]["fused"]["ate_rmse_m"] < summary["estimators"]["odometry"][
-            "ate_rmse_m"
-        ]
+        assert (
+            summary["estimators"]["fused"]["ate_rmse_m"]
+            < summary["estimators"]["odometry"]["ate_rmse_m"]
+        )
         assert {"report.html", "fused.tum", "truth.tum"} <= {p.name for p in (out / run).iterdir()}
 
 
@@ -80,6 +89,15 @@ def test_bad_world_is_one_line_naming_file_and_field(tmp_path: Path, edit: str, 
     assert len(lines) == 1, result.stderr
     assert str(path) in lines[0] and field in lines[0]
     assert not out.exists()  # nothing half-written
+
+
+def test_demo_unknown_anchor_is_one_line_and_writes_nothing(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    result = run_tagloc("demo", "--out", str(out), "--anchor", "99")
+    assert result.returncode == 1
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "tag36h11:99" in lines[0], result.stderr
+    assert not out.exists()
 
 
 def test_world_check_accepts_the_default_world() -> None:

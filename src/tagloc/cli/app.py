@@ -44,11 +44,18 @@ def demo(
     quick: Annotated[
         bool, typer.Option("--quick", help="Skip the survey; localize against the true map.")
     ] = False,
+    anchor: Annotated[
+        list[int],
+        typer.Option(
+            help="Survey anchor tag id, held at its true pose (repeat; default: the "
+            "first tag seen)."
+        ),
+    ] = [],  # noqa: B006
 ) -> None:
     """Survey the built-in building, build its tag map, localize a drive against it, report."""
     from tagloc.cli.demo import run_demo
 
-    run_demo(out=out, world_path=world, seed=seed, duration_s=duration, quick=quick)
+    run_demo(out=out, world_path=world, seed=seed, duration_s=duration, quick=quick, anchors=anchor)
 
 
 @world_app.command("check")

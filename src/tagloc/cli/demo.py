@@ -3,7 +3,8 @@
 Steps of :func:`run_demo`:
 
 1. **Survey**: simulate a survey drive (the route with its own odometry seed), build the tag map
-   from its drifting odometry and simulated detections (:mod:`tagloc.mapping`, one anchor tag),
+   from its drifting odometry and simulated detections (:mod:`tagloc.mapping`; anchors: the
+   first tag seen, or the ``--anchor`` tags, held at their true poses as if measured by hand),
    write ``map/tags.yaml`` and its QA report, and score it against the world's true tag poses.
 2. **Localize**: simulate a second drive (the default scenario, legged odometry) and localize it
    through the same message stream a bag gives, against the *built* map; for reference, also
@@ -19,6 +20,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -47,6 +49,7 @@ class SurveyResult:
     errors: MapErrors
     distance_m: float
     seconds: float
+    anchors: tuple[int, ...]
 
 
 @dataclass(frozen=True, slots=True)
@@ -61,9 +64,12 @@ class DemoResult:
     files: tuple[Path, ...]
 
 
-def survey_and_build(world: World, seed: int, out: Path) -> SurveyResult:
-    """Simulate a survey drive with odometry seed ``seed``, build its tag map, write
-    ``out/tags.yaml`` and ``out/map_report.md``, and score the map against ``world``."""
+def survey_and_build(
+    world: World, seed: int, out: Path, anchors: Sequence[int] | None = None
+) -> SurveyResult:
+    """Simulate a survey drive with odometry seed ``seed``, build its tag map (``anchors``: tag
+    ids held at their true poses; default the first tag seen), write ``out/tags.yaml`` and
+    ``out/map_report.md``, and score the map against ``world``."""
     from tagloc.fileutil import atomic_write_text
     from tagloc.mapping import build_map_from_drive, map_errors
     from tagloc.sim import ObservationConfig, simulate_drive
@@ -72,14 +78,22 @@ def survey_and_build(world: World, seed: int, out: Path) -> SurveyResult:
     start = time.perf_counter()
     drive = simulate_drive(world, seed=seed)
     tag_map, report = build_map_from_drive(
-        drive, ObservationConfig(seed=seed), camera_stride=SURVEY_CAMERA_STRIDE
+        drive,
+        ObservationConfig(seed=seed),
+        anchors=list(anchors) if anchors else None,
+        camera_stride=SURVEY_CAMERA_STRIDE,
     )
     out.mkdir(parents=True, exist_ok=True)
     save_tag_map(tag_map, out / "tags.yaml")
     atomic_write_text(out / "map_report.md", report.to_markdown())
     distance = float(drive.distance_m[-1] - drive.distance_m[0])
     return SurveyResult(
-        tag_map, report, map_errors(tag_map, world), distance, time.perf_counter() - start
+        tag_map,
+        report,
+        map_errors(tag_map, world),
+        distance,
+        time.perf_counter() - start,
+        tuple(e.id for e in tag_map.anchors),
     )
 
 
@@ -89,8 +103,15 @@ def run_demo(
     seed: int | None,
     duration_s: float | None = None,
     quick: bool = False,
+    anchors: Sequence[int] = (),
 ) -> DemoResult:
-    """Survey, localize and evaluate (module docstring); every output lands in ``out``."""
+    """Survey, localize and evaluate (module docstring); every output lands in ``out``.
+
+    Raises
+    ------
+    SimulationError
+        An anchor id the world has no tag for (before anything is written).
+    """
     from tagloc.eval import write_report
     from tagloc.eval.drive_report import summarize_drive
     from tagloc.eval.plots import plot_world_and_paths
@@ -100,6 +121,8 @@ def run_demo(
 
     console = Console()
     world = load_default_world() if world_path is None else load_world(world_path)
+    for tag_id in anchors:
+        world.find_tag(tag_id)
     seed = world.robot.odometry.seed if seed is None else seed
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "world.yaml", world.to_yaml_text())
@@ -108,7 +131,7 @@ def run_demo(
     survey = None
     if not quick:
         with console.status("surveying: simulated survey drive, factor-graph map build"):
-            survey = survey_and_build(world, seed + 1, out / "map")
+            survey = survey_and_build(world, seed + 1, out / "map", anchors)
         files += [out / "map" / "tags.yaml", out / "map" / "map_report.md"]
     # 2. the drive to localize, against the built map (and the true map for reference)
     scenario = build_scenario("default", seed, duration_s, world=world)
@@ -166,6 +189,8 @@ def _table(
         rows += [
             ("survey: distance / tags mapped",
              f"{survey.distance_m:.0f} m / {len(survey.tag_map)}"),
+            ("survey: anchor tags (true poses)",
+             f"{len(survey.anchors)}: " + ", ".join(str(i) for i in survey.anchors)),
             (
                 "survey: map error vs truth (RMS)",
                 f"{e.position_rms_m * 100:.1f} cm, {e.rotation_rms_deg:.2f} deg "
