@@ -12,6 +12,7 @@ from tagloc.cli.eval_cmd import eval_app
 from tagloc.cli.eval_tags_cmd import eval_tags  # noqa: F401  (registers tagloc eval tags)
 from tagloc.cli.map_cmd import map_app
 from tagloc.cli.sim_cmd import sim_app
+from tagloc.cli.world_cmd import coverage
 
 app = typer.Typer(
     name="tagloc",
@@ -20,7 +21,11 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
     add_completion=False,
 )
-world_app = typer.Typer(help="Simulated worlds: check a world file.", no_args_is_help=True)
+world_app = typer.Typer(
+    help="Simulated worlds: check a world file, find where its route sees no tag.",
+    no_args_is_help=True,
+)
+world_app.command("coverage")(coverage)
 app.add_typer(world_app, name="world")
 app.add_typer(map_app, name="map")
 app.add_typer(eval_app, name="eval")

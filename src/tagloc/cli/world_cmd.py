@@ -1,0 +1,100 @@
+"""``tagloc world coverage``: where the route sees no tag (:mod:`tagloc.sim.coverage`)."""
+
+from __future__ import annotations
+
+import csv
+import io
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from pydantic import ValidationError
+
+from tagloc.errors import ConfigError
+
+
+def coverage(
+    path: Annotated[
+        Path | None, typer.Argument(help="World YAML file (default: the built-in office floor).")
+    ] = None,
+    laps: Annotated[int, typer.Option(help="Laps of the route to drive.")] = 1,
+    stride: Annotated[int, typer.Option(help="Check every n-th camera frame.")] = 3,
+    min_distance: Annotated[
+        float, typer.Option(help="List gaps of at least this many metres ...")
+    ] = 1.0,
+    min_rotation: Annotated[
+        float, typer.Option(help="... or of this many degrees of turn.")
+    ] = 30.0,
+    max_range: Annotated[
+        float | None, typer.Option(help="Count a tag as in view within this range, m (default 8).")
+    ] = None,
+    max_view_angle: Annotated[
+        float | None, typer.Option(help="... and this angle off its face, deg (default 75).")
+    ] = None,
+    csv_out: Annotated[
+        Path | None, typer.Option("--csv", help="Also write the gaps as CSV.")
+    ] = None,
+) -> None:
+    """List the stretches of the route where the camera sees no tag (plan tags before
+    installing them: the survey and the filter run on odometry alone there)."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from tagloc.fileutil import atomic_write_text
+    from tagloc.sim import ObservationConfig, load_default_world, load_world
+    from tagloc.sim.coverage import route_coverage
+
+    world = load_default_world() if path is None else load_world(path)
+    limits = {
+        k: v
+        for k, v in (("max_range_m", max_range), ("max_view_angle_deg", max_view_angle))
+        if v is not None
+    }
+    try:
+        config = ObservationConfig(**limits)
+    except ValidationError as exc:
+        raise ConfigError(f"--max-range / --max-view-angle: {exc.errors()[0]['msg']}") from exc
+    report = route_coverage(
+        world, config, laps=laps, stride=stride, min_distance_m=min_distance,
+        min_rotation_deg=min_rotation,
+    )  # fmt: skip
+    table = Table(title=f"{world.name or path}: stretches with no tag in view")
+    for name in ("t (s)", "from (x, y)", "to (x, y)", "m", "deg", "tags before", "tags after"):
+        table.add_column(name, justify="right" if name in ("t (s)", "m", "deg") else "left")
+    rows = [
+        (
+            f"{g.start_s:.1f}-{g.end_s:.1f}",
+            f"{g.start_xy[0]:.1f}, {g.start_xy[1]:.1f}",
+            f"{g.end_xy[0]:.1f}, {g.end_xy[1]:.1f}",
+            f"{g.distance_m:.1f}",
+            f"{g.rotation_deg:.0f}",
+            " ".join(map(str, g.tags_before)) or "-",
+            " ".join(map(str, g.tags_after)) or "-",
+        )
+        for g in report.gaps
+    ]
+    for row in rows:
+        table.add_row(*row)
+    console = Console()
+    console.print(table)
+    longest = report.longest()
+    console.print(
+        f"{report.length_m:.0f} m driven, {report.frames} frames checked: a tag in view over "
+        f"{report.covered_fraction * 100:.1f} % of the distance; {len(report.gaps)} gaps of "
+        f">= {min_distance:g} m or >= {min_rotation:g} deg"
+        + (f", the longest {longest.distance_m:.1f} m" if longest else "")
+    )
+    if csv_out is not None:
+        buffer = io.StringIO()
+        writer = csv.writer(buffer, lineterminator="\n")
+        writer.writerow(["start_s", "end_s", "start_x", "start_y", "end_x", "end_y",
+                         "distance_m", "rotation_deg", "tags_before", "tags_after"])  # fmt: skip
+        for g in report.gaps:
+            numbers = (*g.start_xy, *g.end_xy, g.distance_m)
+            writer.writerow([
+                f"{g.start_s:.3f}", f"{g.end_s:.3f}", *(f"{v:.3f}" for v in numbers),
+                f"{g.rotation_deg:.1f}", " ".join(map(str, g.tags_before)),
+                " ".join(map(str, g.tags_after)),
+            ])  # fmt: skip
+        atomic_write_text(csv_out, buffer.getvalue())
+        console.print(f"wrote {csv_out}")
