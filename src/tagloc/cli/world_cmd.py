@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import csv
-import io
 from pathlib import Path
 from typing import Annotated
 
@@ -42,7 +40,7 @@ def coverage(
 
     from tagloc.fileutil import atomic_write_text
     from tagloc.sim import ObservationConfig, load_default_world, load_world
-    from tagloc.sim.coverage import route_coverage
+    from tagloc.sim.coverage import gaps_csv, route_coverage
 
     world = load_default_world() if path is None else load_world(path)
     limits = {
@@ -85,16 +83,5 @@ def coverage(
         + (f", the longest {longest.distance_m:.1f} m" if longest else "")
     )
     if csv_out is not None:
-        buffer = io.StringIO()
-        writer = csv.writer(buffer, lineterminator="\n")
-        writer.writerow(["start_s", "end_s", "start_x", "start_y", "end_x", "end_y",
-                         "distance_m", "rotation_deg", "tags_before", "tags_after"])  # fmt: skip
-        for g in report.gaps:
-            numbers = (*g.start_xy, *g.end_xy, g.distance_m)
-            writer.writerow([
-                f"{g.start_s:.3f}", f"{g.end_s:.3f}", *(f"{v:.3f}" for v in numbers),
-                f"{g.rotation_deg:.1f}", " ".join(map(str, g.tags_before)),
-                " ".join(map(str, g.tags_after)),
-            ])  # fmt: skip
-        atomic_write_text(csv_out, buffer.getvalue())
+        atomic_write_text(csv_out, gaps_csv(report))
         console.print(f"wrote {csv_out}")

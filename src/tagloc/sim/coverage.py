@@ -24,6 +24,8 @@ Example
 
 from __future__ import annotations
 
+import csv
+import io
 import math
 from dataclasses import dataclass
 
@@ -35,7 +37,7 @@ from tagloc.sim.drive import simulate_drive
 from tagloc.sim.observations import ObservationConfig, simulate_observations
 from tagloc.sim.world import World
 
-__all__ = ["CoverageGap", "RouteCoverage", "route_coverage"]
+__all__ = ["CoverageGap", "RouteCoverage", "gaps_csv", "route_coverage"]
 
 FloatArray = npt.NDArray[np.float64]
 S = 1_000_000_000
@@ -133,11 +135,9 @@ def route_coverage(
         tuple(sorted({s.tag_id for s in frame.truth}))
         for frame in simulate_observations(drive, config or ObservationConfig(), stamps_ns=stamps)
     ]
-    truth = drive.ground_truth_at(stamps).T_map_base
-    xy = np.asarray(truth.translation)[:, :2]
-    R = truth.rotation.as_matrix()
-    yaw = np.unwrap(np.arctan2(R[:, 1, 0], R[:, 0, 0]))
-    step_m = np.linalg.norm(np.diff(xy, axis=0), axis=1)
+    truth = drive.ground_truth_at(stamps)
+    xy, yaw = truth.xy_yaw_map_base[:, :2], truth.xy_yaw_map_base[:, 2]  # yaw is continuous
+    step_m = np.diff(truth.distance_m)  # along the path, not the chord
     step_rad = np.abs(np.diff(yaw))
     in_view = np.array([bool(ids) for ids in seen])
     covered = in_view[:-1] | in_view[1:]
@@ -187,3 +187,20 @@ def _gaps(
             )
         )
     return out
+
+
+def gaps_csv(report: RouteCoverage) -> str:
+    """The gaps as CSV text: one row per gap, seconds, metres and degrees; tag ids separated by
+    spaces."""
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(["start_s", "end_s", "start_x", "start_y", "end_x", "end_y",
+                     "distance_m", "rotation_deg", "tags_before", "tags_after"])  # fmt: skip
+    for g in report.gaps:
+        metres = (*g.start_xy, *g.end_xy, g.distance_m)
+        writer.writerow([
+            f"{g.start_s:.3f}", f"{g.end_s:.3f}", *(f"{v:.3f}" for v in metres),
+            f"{g.rotation_deg:.1f}", " ".join(map(str, g.tags_before)),
+            " ".join(map(str, g.tags_after)),
+        ])  # fmt: skip
+    return buffer.getvalue()
