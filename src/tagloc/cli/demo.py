@@ -117,7 +117,7 @@ def run_demo(
     from tagloc.eval.plots import plot_world_and_paths
     from tagloc.fileutil import atomic_write_text
     from tagloc.sim import load_default_world, load_world
-    from tagloc.sim.scenarios import build_scenario, localize_scenario
+    from tagloc.sim.scenarios import ScenarioSource, build_scenario, localize_scenario
 
     console = Console()
     world = load_default_world() if world_path is None else load_world(world_path)
@@ -135,12 +135,14 @@ def run_demo(
         files += [out / "map" / "tags.yaml", out / "map" / "map_report.md"]
     # 2. the drive to localize, against the built map (and the true map for reference)
     scenario = build_scenario("default", seed, duration_s, world=world)
+    source = ScenarioSource(scenario)  # the drive's detections, shared by both runs
     with console.status("localizing against the true tag map"):
-        run_true = localize_scenario(scenario)
+        run_true = localize_scenario(scenario, source=source)
     run_built = None
     if survey is not None:
         with console.status("localizing against the built tag map"):
-            run_built = localize_scenario(replace(scenario, tag_map=survey.tag_map))
+            built = replace(scenario, tag_map=survey.tag_map)
+            run_built = localize_scenario(built, source=source)
     # 3. evaluation reports, the picture, the table
     summaries = {"true map": write_report(run_true, out / "localize_true_map")}
     files += [out / "localize_true_map" / "report.html"]

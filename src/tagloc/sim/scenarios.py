@@ -348,9 +348,17 @@ def localize_scenario(
     scenario: Scenario,
     config: LocalizerConfig | None = None,
     fiducial: FiducialConfig | None = None,
+    source: ScenarioSource | None = None,
 ) -> LocalizationRun:
-    """Localize a built scenario (see :func:`run_scenario`) through the message stream."""
-    source = ScenarioSource(scenario)
+    """Localize a built scenario (see :func:`run_scenario`) through the message stream.
+
+    ``source``: the scenario's stream if already built (it does not depend on
+    ``scenario.tag_map``, so runs of one drive against different maps can share it).
+    """
+    if source is None:
+        source = ScenarioSource(scenario)
+    elif source.scenario.drive is not scenario.drive:
+        raise ValueError("localize_scenario: the source was built from another drive")
     config = config if config is not None else scenario_config()
     # the tag sensor's noise model calibrated to the simulated detector (as one calibrates
     # sigma_px on a real detector's corners)
