@@ -160,3 +160,13 @@ def test_nan_pose_is_an_evaluation_error(tmp_path: Path) -> None:
     with pytest.raises(EvaluationError):
         write_report(run, tmp_path)
     assert not (tmp_path / "summary.json").exists()
+
+
+def test_kidnap_run_keeps_the_ate_check_by_name_unjudged(tmp_path: Path) -> None:
+    run = synthetic_run()
+    run.kidnaps_ns = [int(run.stamps_ns[1000])]
+    summary = write_report(run, tmp_path)
+    checks = {c["name"]: c for c in json.loads((tmp_path / "summary.json").read_text())["checks"]}
+    ate = checks["fused ATE RMSE (m)"]  # same name as in a run without a kidnap
+    assert ate["passed"] is None and "kidnap" in ate["target"]
+    assert ate["value"] == pytest.approx(summary.estimators["fused"].ate_rmse_m)
