@@ -17,7 +17,7 @@ import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Literal
 
 import numpy as np
 import typer
@@ -38,12 +38,16 @@ class LocalizeSummary:
     lines: tuple[str, ...]
 
 
-def write_stream_bag(stream: Iterable[tuple[str, Message]], path: Path) -> int:
-    """Record a message stream (e.g. a simulated scenario) to an MCAP bag; return the count."""
+def write_stream_bag(
+    stream: Iterable[tuple[str, Message]],
+    path: Path,
+    bag_format: Literal["mcap", "ros2", "ros1"] = "mcap",
+) -> int:
+    """Record a message stream (e.g. a simulated scenario) to a bag; return the count."""
     from tagloc.io import BagSink
 
     n = 0
-    with BagSink(path, "mcap", overwrite=True) as sink:
+    with BagSink(path, bag_format, overwrite=True) as sink:
         for topic, msg in stream:
             sink.write(topic, msg)
             n += 1

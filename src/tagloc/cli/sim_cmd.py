@@ -35,7 +35,8 @@ def sim_record(
     ] = None,
 ) -> None:
     """Record a simulated scenario (odometry, tag detections, camera, truth) to a bag."""
-    from tagloc.io import BagSink, BagWriteError
+    from tagloc.cli.localize_cmd import write_stream_bag
+    from tagloc.io import BagWriteError
     from tagloc.sim.scenarios import ScenarioSource, build_scenario
     from tagloc.tags import save_tag_map
 
@@ -45,11 +46,7 @@ def sim_record(
     bag_format: Literal["mcap", "ros2", "ros1"] = kind  # type: ignore[assignment]
     built = build_scenario(scenario, seed, duration)
     source = ScenarioSource(built)
-    n = 0
-    with BagSink(out, bag_format, overwrite=True) as sink:
-        for topic, msg in source:
-            sink.write(topic, msg)
-            n += 1
+    n = write_stream_bag(source, out, bag_format)
     tags_path = tags_out if tags_out is not None else out.parent / "tags.yaml"
     save_tag_map(built.tag_map, tags_path)
     typer.echo(
