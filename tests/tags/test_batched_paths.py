@@ -1,8 +1,12 @@
-"""Batched fast paths of the per-frame pipeline equal the per-tag computations they replace.
+"""Batched fast paths of the per-frame pipeline against the computations they replace.
 
-Oracles: the plain per-call formulas (written out here, one rotation and one covariance at a
-time, as the module docstrings state them), the per-tag calls of the public API, and the
-:class:`SE3` methods the geometry fast paths stand in for (bit for bit).
+Oracles: one formula written out here (:meth:`OrientationPrior.chi2` as its docstring states
+it, one rotation at a time; the prior evidences agree with it and with the per-tag calls to
+1e-9), the :class:`SE3` methods the geometry fast paths stand in for (bit for bit), and for the
+frame's shared PnP pass (:func:`estimate_frame`, :func:`observe_tags`) the public calls it
+replaces, :func:`estimate_tag_poses` then :func:`estimate_joint_pose` (bit for bit; these are
+the same solver, not an independent one), with ``T_map_base`` checked against
+``T_map_cam T_base_cam^-1`` and the adjoint of ``T_base_cam`` written out here.
 """
 
 from __future__ import annotations
@@ -15,7 +19,7 @@ from test_pnp import CAMERA, corners_of, level_camera, wall_tags, wall_view
 
 from tagloc.geometry import SE3, SO3
 from tagloc.geometry.small_batch import row_norms, se3_minus, se3_plus
-from tagloc.tags import _frame
+from tagloc.tags import _frame, observation
 from tagloc.tags._frame import estimate_frame
 from tagloc.tags.covariance import NoiseModel
 from tagloc.tags.detection import TagDetection
@@ -134,6 +138,14 @@ def test_tag_prior_evidences_with_mixed_priors_fall_back_per_tag() -> None:
     batched = tag_prior_evidences(priors, estimates)
     for prior, est, got in zip(priors, estimates, batched, strict=True):
         assert got == tag_prior_evidence(prior, est)
+        for name, R, C in (
+            ("chi2", est.T_cam_tag, est.cov_rot_laplace),
+            ("chi2_alt", est.T_cam_tag_alt, est.cov_rot_laplace_alt),
+            ("innovation_chi2", est.T_cam_tag, est.cov_cam_tag[3:, 3:]),
+            ("innovation_chi2_alt", est.T_cam_tag_alt, est.cov_cam_tag_alt[3:, 3:]),
+        ):
+            expected = _reference_chi2(prior, R.rotation.matrix, C)
+            assert getattr(got, name) == pytest.approx(expected, rel=1e-9, abs=1e-12)
     with pytest.raises(ValueError, match="2 priors for 3 estimates"):
         tag_prior_evidences(priors[:2], estimates)
 
@@ -264,3 +276,145 @@ def test_observe_tags_recomputes_the_joint_when_a_tag_it_guessed_drops_out(
     joint = estimate_joint_pose(estimates, corners, [tag_poses[i] for i in ids], CAMERA, noise)
     assert result.joint is not None and result.joint.tag_ids == tuple(ids)
     _assert_same_joint(result.joint, joint)  # no prior: the policy keeps the best branch
+
+
+def _spy(monkeypatch: pytest.MonkeyPatch, module: object, name: str) -> list[tuple[object, ...]]:
+    """Record the positional arguments of every call of ``module.name`` (still called)."""
+    real = getattr(module, name)
+    calls: list[tuple[object, ...]] = []
+
+    def spy(*args: object, **kwargs: object) -> object:
+        calls.append(args)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(module, name, spy)
+    return calls
+
+
+def _adjoint(T: SE3) -> FloatArray:
+    """``Ad_T`` for tangents ``[x, y, z, rx, ry, rz]``: ``[[R, [t]x R], [0, R]]``."""
+    R, t = T.rotation.matrix, np.asarray(T.translation)
+    out = np.zeros((6, 6))
+    out[:3, :3], out[:3, 3:], out[3:, 3:] = R, _hat(t) @ R, R
+    return out
+
+
+@pytest.mark.parametrize("seed", [0, 4])
+def test_estimate_frame_with_extrinsics_gives_the_base_pose_of_the_camera_pose(seed: int) -> None:
+    n = 3 + seed % 2
+    tags, tag_poses = _frame_detections(seed, n)
+    noise = NoiseModel(sigma_px=0.3)
+    T_base_cam = SE3(
+        rotation=SO3.from_matrix([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+        @ SO3.from_rotvec(np.array([0.02, -0.01, 0.03])),
+        translation=np.array([0.25, -0.04, 0.9]),
+    )
+    _, guess = estimate_frame(tags, CAMERA, noise, 2.0, tag_poses, T_base_cam)
+    assert guess is not None and guess.estimate is not None
+    got = guess.estimate
+    assert got.T_map_base is not None and got.cov_map_base is not None
+    # independent: T_map_base = T_map_cam T_cam_base; its right tangent is Ad_{T_base_cam} of
+    # the camera's (T_map_cam Exp(d) T_cam_base = T_map_base Exp(Ad_{T_base_cam} d))
+    want = got.T_map_cam @ T_base_cam.inverse()
+    assert got.T_map_base.allclose(want, atol=1e-12)
+    Ad = _adjoint(T_base_cam)
+    np.testing.assert_allclose(got.cov_map_base, Ad @ got.cov_map_cam @ Ad.T, rtol=1e-9, atol=1e-15)
+    # and the joint PnP alone with the extrinsics, bit for bit
+    ids = [det.tag_id for det, _ in tags]
+    corners = np.array([det.corners_px for det, _ in tags])
+    reference = [e for e in estimate_tag_poses(ids, corners, [0.16] * n, CAMERA, noise) if e]
+    joint = estimate_joint_pose(
+        reference, corners, list(tag_poses.values()), CAMERA, noise, T_base_cam
+    )
+    assert joint is not None and joint.T_map_base is not None
+    _assert_same_joint(got, joint)
+    assert got.T_map_base.allclose(joint.T_map_base, atol=0.0)
+    np.testing.assert_array_equal(got.cov_map_base, joint.cov_map_base)
+
+
+def test_observe_tags_takes_the_early_joint_estimate_on_a_normal_frame(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    tags, tag_poses = _frame_detections(2, 4)
+    noise = NoiseModel(sigma_px=0.3)
+    calls = _spy(monkeypatch, observation, "estimate_joint_pose")
+    result = observe_tags([det for det, _ in tags], CAMERA, 0.16, tag_poses=tag_poses, noise=noise)
+    # face-on tags: single-tag poses ambiguous, but all four fit and the joint takes them
+    assert set(result.counts()) <= {RejectReason.AMBIGUOUS}
+    assert result.joint is not None and result.joint.tag_ids == tuple(tag_poses)
+    assert calls == []  # step 2's guess was these tags: no second joint PnP
+
+
+def test_estimate_frame_goes_per_tag_at_once_when_the_batched_tag_stage_fails(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    tags, tag_poses = _frame_detections(1, 3)
+    noise = NoiseModel(sigma_px=0.3)
+
+    def fail(*args: object, **kwargs: object) -> None:
+        raise np.linalg.LinAlgError("batched tag stage")
+
+    monkeypatch.setattr(_frame, "refine_tag_problems", fail)
+    calls = _spy(monkeypatch, _frame, "estimate_tag_poses")
+    estimates, guess = estimate_frame(tags, CAMERA, noise, 2.0, tag_poses, None)
+    assert guess is None
+    assert [c[0] for c in calls] == [[det.tag_id] for det, _ in tags]  # no batch retried
+    for (det, size), got in zip(tags, estimates, strict=True):
+        (want,) = estimate_tag_poses([det.tag_id], det.corners_px[None], [size], CAMERA, noise)
+        _assert_same_estimate(got, want)
+
+
+def test_estimate_frame_per_tag_fallback_costs_a_bad_tag_only_itself(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    tags, tag_poses = _frame_detections(1, 3)
+    noise = NoiseModel(sigma_px=0.3)
+    real = _frame.estimate_tag_poses
+    bad = tags[1][0].tag_id
+
+    def fail_on_bad(ids: list[int], *args: object, **kwargs: object) -> object:
+        if bad in ids:
+            raise ValueError("bad tag")
+        return real(ids, *args, **kwargs)  # type: ignore[arg-type]
+
+    def batch_fails(*args: object, **kwargs: object) -> None:
+        raise ValueError("batched tag stage")
+
+    monkeypatch.setattr(_frame, "finish_branches", batch_fails)  # after the batched refinement
+    monkeypatch.setattr(_frame, "estimate_tag_poses", fail_on_bad)
+    estimates, guess = estimate_frame(tags, CAMERA, noise, 2.0, tag_poses, None)
+    assert guess is None and estimates[1] is None
+    assert estimates[0] is not None and estimates[2] is not None
+
+
+@pytest.mark.parametrize("stage", ["refine_joint_problem", "joint_estimate"])
+def test_estimate_frame_keeps_the_tags_when_the_joint_stage_fails(
+    monkeypatch: pytest.MonkeyPatch, stage: str
+) -> None:
+    tags, tag_poses = _frame_detections(5, 3)
+    noise = NoiseModel(sigma_px=0.3)
+    dets = [det for det, _ in tags]
+    expected = observe_tags(dets, CAMERA, 0.16, tag_poses=tag_poses, noise=noise)
+
+    def fail(*args: object, **kwargs: object) -> None:
+        raise np.linalg.LinAlgError("joint stage")
+
+    monkeypatch.setattr(_frame, stage, fail)
+    refine_calls = _spy(monkeypatch, _frame, "refine_tag_problems")
+    batch_calls = _spy(monkeypatch, _frame, "estimate_tag_poses")
+    estimates, guess = estimate_frame(tags, CAMERA, noise, 2.0, tag_poses, None)
+    assert guess is None
+    assert len(refine_calls) == 1 and batch_calls == []  # the refined tags were kept
+    ids = [det.tag_id for det in dets]
+    corners = np.array([det.corners_px for det in dets])
+    reference = estimate_tag_poses(ids, corners, [0.16] * 3, CAMERA, noise)
+    for got, want in zip(estimates, reference, strict=True):
+        _assert_same_estimate(got, want)
+    # observe_tags then runs its own joint PnP (unpatched), to the same result
+    joint_calls = _spy(monkeypatch, observation, "estimate_joint_pose")
+    result = observe_tags(dets, CAMERA, 0.16, tag_poses=tag_poses, noise=noise)
+    assert len(joint_calls) == 1
+    assert expected.joint is not None
+    _assert_same_joint(result.joint, expected.joint)
+    for got_tag, want_tag in zip(result.accepted, expected.accepted, strict=True):
+        _assert_same_estimate(got_tag, want_tag)

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+import numpy.typing as npt
 
 from tagloc.camera import CameraModel
 from tagloc.errors import TaglocError
@@ -29,7 +30,9 @@ from tagloc.tags.covariance import NoiseModel
 from tagloc.tags.detection import TagDetection
 from tagloc.tags.pnp import (
     JointPoseEstimate,
+    JointProblem,
     TagPoseEstimate,
+    TagProblems,
     estimate_tag_poses,
     finish_branches,
     joint_estimate,
@@ -39,7 +42,7 @@ from tagloc.tags.pnp import (
 )
 
 _LOG = logging.getLogger(__name__)
-#: What a bad tag can raise from PnP (it then costs only itself, see :func:`safe_estimates`).
+#: What a bad tag can raise from PnP (it then costs only itself, see :func:`per_tag_estimates`).
 PNP_ERRORS = (TaglocError, ValueError, np.linalg.LinAlgError, cv2.error)
 
 
@@ -72,8 +75,9 @@ def estimate_frame(
     """Single-tag estimates of ``tags`` (``(detection, size)``) and, with ``tag_poses``, the
     joint estimate over :func:`joint_rows` of them (None if fewer than 2).
 
-    Never raises for a bad tag: on an error the tags go through :func:`safe_estimates` and no
-    guess is returned (the caller's own joint PnP then meets the error where it would have).
+    Never raises for a bad tag: if the batched tag stage fails, the tags go through
+    :func:`per_tag_estimates`; if the joint stage fails, the tags are kept and no guess is
+    returned (the caller's own joint PnP then meets the error where it would have).
     """
     if not tags:
         return [], None
@@ -82,53 +86,69 @@ def estimate_frame(
     sizes = [size for _, size in tags]
     try:
         problems = refine_tag_problems(ids, corners, sizes, camera, noise)
-        assert problems is not None
-        rows: tuple[int, ...] = ()
-        if tag_poses is not None:
-            rows = joint_rows(ids, problems.reproj_err_px.tolist(), max_reproj_err_px)
-        if len(rows) < 2:
-            finished = finish_branches(camera, noise, [problems.refined])
-            return tag_estimates(problems, finished[0]), None
-        assert tag_poses is not None
-        refined = problems.refined
-        both = list(rows)
-        joint = refine_joint_problem(
-            tuple(ids[i] for i in rows),
-            SE3.from_trusted(
-                np.concatenate([refined.R[both, 0], refined.R[both, 1]]),
-                np.concatenate([refined.t[both, 0], refined.t[both, 1]]),
-            ),
-            [float(problems.sizes[i]) for i in rows],
-            [float(refined.view_angle[i, 0]) for i in rows],
-            corners[both],
-            [tag_poses[ids[i]] for i in rows],
-            camera,
-            noise,
-        )
-        finished = finish_branches(camera, noise, [refined, joint.refined])
-        guess = JointGuess(rows, joint_estimate(joint, finished[1], T_base_cam))
-        return tag_estimates(problems, finished[0]), guess
     except PNP_ERRORS:
-        return safe_estimates(tags, camera, noise), None
+        return per_tag_estimates(tags, camera, noise), None
+    assert problems is not None
+    rows: tuple[int, ...] = ()
+    if tag_poses is not None:
+        rows = joint_rows(ids, problems.reproj_err_px.tolist(), max_reproj_err_px)
+    if len(rows) >= 2:
+        assert tag_poses is not None
+        try:
+            joint = _refine_joint(problems, rows, corners, tag_poses, camera, noise)
+            both = finish_branches(camera, noise, [problems.refined, joint.refined])
+        except PNP_ERRORS as exc:  # the tags are kept, finished alone below
+            _LOG.debug("joint PnP of tags %s: %s", [ids[i] for i in rows], exc)
+        else:
+            estimates = tag_estimates(problems, both[0])
+            try:
+                return estimates, JointGuess(rows, joint_estimate(joint, both[1], T_base_cam))
+            except PNP_ERRORS as exc:
+                _LOG.debug("joint PnP of tags %s: %s", [ids[i] for i in rows], exc)
+                return estimates, None
+    try:
+        finished = finish_branches(camera, noise, [problems.refined])
+    except PNP_ERRORS:
+        return per_tag_estimates(tags, camera, noise), None
+    return tag_estimates(problems, finished[0]), None
 
 
-def safe_estimates(
+def _refine_joint(
+    problems: TagProblems,
+    rows: tuple[int, ...],
+    corners: npt.NDArray[np.float64],
+    tag_poses: Mapping[int, SE3],
+    camera: CameraModel,
+    noise: NoiseModel,
+) -> JointProblem:
+    """:func:`refine_joint_problem` of the tags ``rows`` from their refined branches (what
+    :func:`~tagloc.tags.pnp.estimate_joint_pose` starts from)."""
+    refined, ids = problems.refined, problems.tag_ids
+    both = list(rows)
+    return refine_joint_problem(
+        tuple(ids[i] for i in rows),
+        SE3.from_trusted(
+            np.concatenate([refined.R[both, 0], refined.R[both, 1]]),
+            np.concatenate([refined.t[both, 0], refined.t[both, 1]]),
+        ),
+        [float(problems.sizes[i]) for i in rows],
+        [float(refined.view_angle[i, 0]) for i in rows],
+        corners[both],
+        [tag_poses[ids[i]] for i in rows],
+        camera,
+        noise,
+    )
+
+
+def per_tag_estimates(
     tags: Sequence[tuple[TagDetection, float]], camera: CameraModel, noise: NoiseModel
 ) -> list[TagPoseEstimate | None]:
-    """Batched PnP; if the batch fails, one tag at a time so that one bad tag costs only itself."""
-    ids = [det.tag_id for det, _ in tags]
-    corners = np.array([det.corners_px for det, _ in tags]).reshape(-1, 4, 2)
-    sizes = [size for _, size in tags]
-    try:
-        return estimate_tag_poses(ids, corners, sizes, camera, noise)
-    except PNP_ERRORS:
-        out: list[TagPoseEstimate | None] = []
-        for i in range(len(tags)):
-            try:
-                out += estimate_tag_poses(
-                    ids[i : i + 1], corners[i : i + 1], sizes[i : i + 1], camera, noise
-                )
-            except PNP_ERRORS as exc:
-                _LOG.debug("tag %d: no pose (%s)", ids[i], exc)
-                out.append(None)
-        return out
+    """PnP one tag at a time (after the batch failed), so that one bad tag costs only itself."""
+    out: list[TagPoseEstimate | None] = []
+    for det, size in tags:
+        try:
+            out += estimate_tag_poses([det.tag_id], det.corners_px[None], [size], camera, noise)
+        except PNP_ERRORS as exc:
+            _LOG.debug("tag %d: no pose (%s)", det.tag_id, exc)
+            out.append(None)
+    return out

@@ -19,6 +19,7 @@ Steps (each rejection is a counted :class:`~tagloc.tags.gates.Rejection`, never 
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -28,7 +29,7 @@ import numpy.typing as npt
 
 from tagloc.camera import CameraModel
 from tagloc.geometry import SE3
-from tagloc.tags._frame import estimate_frame
+from tagloc.tags._frame import estimate_frame, joint_rows
 from tagloc.tags.covariance import NoiseModel, ambiguity_mixture, map_base_from_cam
 from tagloc.tags.detection import TagDetection
 from tagloc.tags.gates import (
@@ -291,18 +292,21 @@ def observe_tags(
     # 3. per tag: no pose, reprojection
     fitted, outcomes = _fitting(usable, estimates, config)
     # 4. joint PnP over the known tags that fit (an id seen twice is a mirror or a misread)
-    seen = Counter(est.tag_id for _, est in fitted)
-    known = [(i, est) for i, est in fitted if tag_poses is not None and seen[est.tag_id] == 1]
+    rows: tuple[int, ...] = ()
+    if tag_poses is not None:
+        errors = [math.inf if est is None else est.reproj_err_px for est in estimates]
+        rows = joint_rows([det.tag_id for det, _ in usable], errors, config.max_reproj_err_px)
     result: JointPoseEstimate | None = None
-    if tag_poses is not None and len(known) >= 2:
-        rows = tuple(i for i, _ in known)
+    if tag_poses is not None and len(rows) >= 2:
         if guess is not None and guess.rows == rows:  # step 2 guessed these tags
             result = guess.estimate
         else:
+            by_row = dict(fitted)  # the rows fit, so each has its estimate there
+            known = [by_row[i] for i in rows]
             result = estimate_joint_pose(
-                [est for _, est in known],
+                known,
                 np.array([usable[i][0].corners_px for i in rows]),
-                [tag_poses[est.tag_id] for _, est in known],
+                [tag_poses[est.tag_id] for est in known],
                 camera,
                 noise,
                 T_base_cam,
@@ -322,7 +326,7 @@ def observe_tags(
         else:
             accepted.append(decided)
     joint: JointPoseEstimate | None = None
-    if tag_poses is not None and len(known) >= 2:
+    if tag_poses is not None and len(rows) >= 2:
         if result is None:
             rejections.append(Rejection(None, RejectReason.DEGENERATE, "joint PnP failed"))
         else:
