@@ -16,13 +16,13 @@ import pytest
 from tagloc.camera import PinholeRadtan
 from tagloc.eval.tag_views import sample_wall_view
 from tagloc.geometry import SE3, SO3
+from tagloc.tags._refine import _residuals
 from tagloc.tags.covariance import NoiseModel
 from tagloc.tags.detection import TagDetection, tag_object_points
 from tagloc.tags.observation import ObservationResult, PosePrior, observe_tags
 from tagloc.tags.pnp import (
     TagPoseError,
     TagPoseEstimate,
-    _residuals,
     estimate_joint_pose,
     estimate_tag_pose,
     estimate_tag_poses,

@@ -1,10 +1,10 @@
 """Best and alternative branch of PnP problems, the valley between them, their covariances.
 
-:func:`solve_branches` = :func:`refine_branches` (refine every candidate with
-:func:`~tagloc.tags._refine.refine_poses`, keep the best minimum and the best *other* minimum,
-else the worst raw candidate) then :func:`finish_branches` (the valley between the two and both
-covariances). The second half takes several groups of problems at once (a frame's tags and its
-joint estimate, of different corner counts) and gives each the numbers it would get alone.
+:func:`refine_branches` (refine every candidate with :func:`~tagloc.tags._refine.refine_poses`,
+keep the best minimum and the best *other* minimum, else the worst raw candidate) then
+:func:`finish_branches` (the valley between the two and both covariances). The second takes
+several groups of problems at once (a frame's tags and its joint estimate, of different corner
+counts) and gives each the numbers it would get alone.
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ from tagloc.tags.covariance import (
     laplace_covariance,
     linearized_pose_covariance,
 )
+from tagloc.tags.estimates import _range_and_view_angle
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
@@ -37,17 +38,9 @@ _SAME_MINIMUM_RAD = 1e-3
 _SETTLE_CHI2 = 75.0
 
 
-def _range_and_view_angle(R: FloatArray, t: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Range ``|t|`` and the angle between the tag normal ``R[:, 2]`` and the ray ``-t``."""
-    range_m = row_norms(t)
-    with np.errstate(all="ignore"):
-        cos_angle = -np.einsum("...i,...i->...", R[..., :, 2], t) / range_m
-    return range_m, np.arccos(np.clip(cos_angle, -1.0, 1.0))
-
-
 @dataclass(frozen=True, slots=True)
 class Branches:
-    """Best and alternative minimum of ``K`` PnP problems (:func:`solve_branches`).
+    """Best and alternative minimum of ``K`` PnP problems (:func:`finish_branches`).
 
     Attributes
     ----------
@@ -184,7 +177,27 @@ def refine_branches(
     extent_px: FloatArray,
     view_angle: FloatArray | None = None,
 ) -> Refined:
-    """The first half of :func:`solve_branches` (same parameters): refine, pick two branches."""
+    """Refine ``C`` candidates of each of ``K`` PnP problems; pick the best and the alternative.
+
+    Parameters
+    ----------
+    R0, t0 : (K, C, 3, 3), (K, C, 3) float
+        Initial ``T_cam_obj`` candidates.
+    valid0 : (K, C) bool
+    points_obj : (K, N, 3) float
+    pixels : (K, N, 2) float
+    camera : CameraModel
+    noise : NoiseModel
+    extent_px : (K,) float
+        Apparent target size for the systematic-error term.
+    view_angle : (K,) float, optional
+        Tag viewing angle for the noise model; default from each branch's pose (single tags).
+
+    Returns
+    -------
+    Refined
+        To be finished by :func:`finish_branches`.
+    """
     k, c = valid0.shape
     n = points_obj.shape[1]
     R0 = np.where(valid0[..., None, None], R0, np.eye(3))
@@ -213,7 +226,7 @@ def refine_branches(
 def finish_branches(
     camera: CameraModel, noise: NoiseModel, groups: Sequence[Refined]
 ) -> list[Branches]:
-    """The second half of :func:`solve_branches` for several groups of problems at once.
+    """Valley and covariances of the refined branches of several groups of problems at once.
 
     Per group only what depends on its point count (projections, ``J^T J``); everything else
     in one pass over all rows. Each group's :class:`Branches` equals ``finish_branches(camera,
@@ -243,73 +256,6 @@ def finish_branches(
     return out
 
 
-def solve_branches(
-    R0: FloatArray,
-    t0: FloatArray,
-    valid0: BoolArray,
-    points_obj: FloatArray,
-    pixels: FloatArray,
-    camera: CameraModel,
-    noise: NoiseModel,
-    extent_px: FloatArray,
-    view_angle: FloatArray | None = None,
-) -> Branches:
-    """Refine ``C`` candidates of each of ``K`` PnP problems; best and alternative branch.
-
-    Parameters
-    ----------
-    R0, t0 : (K, C, 3, 3), (K, C, 3) float
-        Initial ``T_cam_obj`` candidates.
-    valid0 : (K, C) bool
-    points_obj : (K, N, 3) float
-    pixels : (K, N, 2) float
-    camera : CameraModel
-    noise : NoiseModel
-    extent_px : (K,) float
-        Apparent target size for the systematic-error term.
-    view_angle : (K,) float, optional
-        Tag viewing angle for the noise model; default from each branch's pose (single tags).
-
-    Returns
-    -------
-    Branches
-    """
-    refined = refine_branches(
-        R0, t0, valid0, points_obj, pixels, camera, noise, extent_px, view_angle
-    )
-    return finish_branches(camera, noise, [refined])[0]
-
-
-def branch_valley(
-    camera: CameraModel,
-    T_best: SE3,
-    T_alt: SE3,
-    sse: FloatArray,
-    points_obj: FloatArray,
-    pixels: FloatArray,
-) -> tuple[FloatArray, FloatArray]:
-    """Tangents between the two branches of ``K`` problems and the cost barrier between them.
-
-    Parameters
-    ----------
-    camera : CameraModel
-    T_best, T_alt : SE3, batches of K
-        ``T_cam_obj`` of the two branches.
-    sse : (K, 2) float
-        Their sums of squared pixel residuals.
-    points_obj : (K, N, 3) float
-    pixels : (K, N, 2) float
-
-    Returns
-    -------
-    delta : (K, 2, 6) float
-        ``T_other (-) T`` from each branch to the other.
-    barrier : (K, 2) float
-        SSE at the geodesic midpoint minus each branch's SSE (pixels^2).
-    """
-    return _valleys(camera, T_best, T_alt, sse, [points_obj], [pixels])
-
-
 def _valleys(
     camera: CameraModel,
     T_best: SE3,
@@ -318,9 +264,17 @@ def _valleys(
     points_obj: Sequence[FloatArray],
     pixels: Sequence[FloatArray],
 ) -> tuple[FloatArray, FloatArray]:
-    """:func:`branch_valley` of groups of problems stacked in ``T_best``, ``T_alt``, ``sse``
-    (group ``g`` has ``points_obj[g]`` (K_g, N_g, 3), ``pixels[g]``): the midpoints of all
-    groups are projected at once."""
+    """Tangents between the two branches of problems stacked in ``T_best``, ``T_alt``, ``sse``
+    (group ``g`` has ``points_obj[g]`` (K_g, N_g, 3), ``pixels[g]``) and the cost barrier
+    between them; the midpoints of all groups are projected at once.
+
+    Returns
+    -------
+    delta : (K, 2, 6) float
+        ``T_other (-) T`` from each branch to the other.
+    barrier : (K, 2) float
+        SSE at the geodesic midpoint minus each branch's SSE (pixels^2).
+    """
     delta = se3_minus(T_alt, T_best)
     mid = _plus(T_best, 0.5 * delta)
     points_cam, start = [], 0

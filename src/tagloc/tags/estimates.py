@@ -13,9 +13,17 @@ import numpy as np
 import numpy.typing as npt
 
 from tagloc.geometry import SE3
-from tagloc.tags._branches import _range_and_view_angle
+from tagloc.geometry.small_batch import row_norms
 
 FloatArray = npt.NDArray[np.float64]
+
+
+def _range_and_view_angle(R: FloatArray, t: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Range ``|t|`` and the angle between the tag normal ``R[:, 2]`` and the ray ``-t``."""
+    range_m = row_norms(t)
+    with np.errstate(all="ignore"):
+        cos_angle = -np.einsum("...i,...i->...", R[..., :, 2], t) / range_m
+    return range_m, np.arccos(np.clip(cos_angle, -1.0, 1.0))
 
 
 @dataclass(frozen=True, slots=True, eq=False)

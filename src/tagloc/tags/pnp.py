@@ -22,13 +22,13 @@ Joint PnP (:func:`estimate_joint_pose`): the same refinement on all corners of a
 map pose, started from the best-fitting branches of the tags, solved in a frame at the corners'
 centroid (map axes) so that the covariance's natural origin is where the tags are.
 
-Both run :func:`solve_branches` (:mod:`tagloc.tags._branches`): refine every candidate
-(:func:`refine_poses`, :mod:`tagloc.tags._refine`), keep the best minimum and the best *other*
-minimum (else the worst raw candidate), measure the valley between them, and compute both
-covariances. Each public function is a refine stage (:func:`refine_tag_problems`,
-:func:`refine_joint_problem`), :func:`finish_branches` and an assembly stage
-(:func:`tag_estimates`, :func:`joint_estimate`); :func:`finish_branches` takes the problems of
-both stages at once, which :func:`~tagloc.tags.observation.observe_tags` uses
+Both run the two halves of :mod:`tagloc.tags._branches`: ``refine_branches`` refines every
+candidate (``refine_poses``, :mod:`tagloc.tags._refine`) and keeps the best minimum and the best
+*other* minimum (else the worst raw candidate); :func:`finish_branches` measures the valley
+between them and computes both covariances. Each public function is a refine stage
+(:func:`refine_tag_problems`, :func:`refine_joint_problem`), :func:`finish_branches` and an
+assembly stage (:func:`tag_estimates`, :func:`joint_estimate`); :func:`finish_branches` takes
+the problems of both stages at once, which :func:`~tagloc.tags.observation.observe_tags` uses
 (:mod:`tagloc.tags._frame`). The result types are in :mod:`tagloc.tags.estimates`.
 """
 
@@ -44,42 +44,26 @@ import numpy.typing as npt
 from tagloc.camera import CameraModel
 from tagloc.geometry import SE3
 from tagloc.geometry.small_batch import row_norms
-from tagloc.tags._branches import (
-    Branches,
-    Refined,
-    branch_valley,
-    finish_branches,
-    refine_branches,
-    solve_branches,
-)
-from tagloc.tags._refine import Refinement, StopRule, _sse, refine_poses
-from tagloc.tags._refine import _residuals as _residuals  # re-exported for the tests
+from tagloc.tags._branches import Branches, Refined, finish_branches, refine_branches
+from tagloc.tags._refine import _sse
 from tagloc.tags.covariance import NoiseModel, map_base_from_cam, map_cam_from_tag
 from tagloc.tags.detection import TagDetection, tag_object_points
 from tagloc.tags.errors import TagError
 from tagloc.tags.estimates import JointPoseEstimate, TagPoseEstimate, _ratio
 
 __all__ = [
-    "Branches",
     "JointPoseEstimate",
     "JointProblem",
-    "Refined",
-    "Refinement",
-    "StopRule",
     "TagPoseError",
     "TagPoseEstimate",
     "TagProblems",
-    "branch_valley",
     "estimate_joint_pose",
     "estimate_tag_pose",
     "estimate_tag_poses",
     "finish_branches",
     "joint_estimate",
-    "refine_branches",
     "refine_joint_problem",
-    "refine_poses",
     "refine_tag_problems",
-    "solve_branches",
     "tag_estimates",
 ]
 
@@ -263,7 +247,7 @@ def estimate_joint_pose(
     """``T_map_cam`` from all corners of ``M >= 1`` tags of known map pose (joint PnP).
 
     Minimizes the pixel reprojection error of all ``4M`` corners through the camera model
-    (:func:`refine_poses`) in a frame ``clu`` at the corners' centroid with map axes. Of the
+    (``refine_poses``) in a frame ``clu`` at the corners' centroid with map axes. Of the
     ``2M`` starts (both branches of every tag, moved to the map) the one that fits all corners
     best and the best one turned >= 5 deg from it are refined: the best minimum and its
     alternative. The covariance is :func:`pose_covariance` of the stacked Jacobian (with the

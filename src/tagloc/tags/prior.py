@@ -16,7 +16,8 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from tagloc.tags.pnp import TagPoseEstimate
+from tagloc.geometry._so3math import hat
+from tagloc.tags.estimates import TagPoseEstimate
 
 FloatArray = npt.NDArray[np.float64]
 _EYE2, _EYE3 = np.eye(2), np.eye(3)
@@ -97,24 +98,16 @@ def _prior_chi2(
         u = np.asarray(prior.up_cam, dtype=np.float64)
         a = a / np.linalg.norm(a, axis=-1, keepdims=True)
         u = u / np.linalg.norm(u)
-        hat_u = _hat(u)
+        hat_u = hat(u)
         e1 = hat_u @ _EYE3[int(np.argmin(np.abs(u)))]
         e1 /= np.linalg.norm(e1)
         B = np.stack([e1, hat_u @ e1])  # (2, 3): orthonormal basis of the plane
-        BJ = B @ hat_u @ R @ _hat(a)  # (n, 2, 3)
+        BJ = B @ hat_u @ R @ hat(a)  # (n, 2, 3)
         g = (B @ (hat_u @ (R @ a[..., None])))[..., 0]
         S = prior.up_sigma_rad**2 * _EYE2 + BJ @ C @ np.swapaxes(BJ, -1, -2)
         g = np.broadcast_to(g, (*total.shape, 2))[..., None]
         total += (np.swapaxes(g, -1, -2) @ np.linalg.solve(S, g))[..., 0, 0]
     return total
-
-
-def _hat(v: FloatArray) -> FloatArray:
-    """``[v]x`` of (3,) or (n, 3) vectors."""
-    out = np.zeros((*v.shape[:-1], 3, 3))
-    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
-    out[..., 1, 0], out[..., 2, 0], out[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
-    return out
 
 
 @dataclass(frozen=True, slots=True)
