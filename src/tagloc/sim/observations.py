@@ -42,7 +42,7 @@ from tagloc.camera import CameraModel
 from tagloc.geometry import SE3
 from tagloc.sim.drive import Drive
 from tagloc.sim.world import World
-from tagloc.tags.detection import TagDetection, tag_object_points
+from tagloc.tags.detection import TagDetection, is_convex_clockwise, tag_object_points
 
 __all__ = [
     "ObservationConfig",
@@ -335,7 +335,7 @@ def _glint(
         corners = center + square
         for _ in range(20):  # a detector only reports convex, clockwise quads: draw one
             jittered = corners + rng.normal(0.0, 0.15 * side, size=(4, 2))
-            if _convex_clockwise(jittered):
+            if is_convex_clockwise(jittered):
                 corners = jittered
                 break
     return TagDetection(
@@ -345,10 +345,3 @@ def _glint(
         hamming=int(rng.integers(0, 3)),
         decision_margin=float(rng.uniform(20.0, 80.0)),
     )
-
-
-def _convex_clockwise(corners: FloatArray) -> bool:
-    """Whether a quad (4, 2) is strictly convex and wound clockwise on screen (v down)."""
-    edges = np.roll(corners, -1, axis=0) - corners
-    following = np.roll(edges, -1, axis=0)
-    return bool((edges[:, 0] * following[:, 1] - edges[:, 1] * following[:, 0] > 0.0).all())

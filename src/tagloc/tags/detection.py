@@ -300,12 +300,18 @@ def _checked_corners(corners_px: npt.ArrayLike, name: str) -> FloatArray:
     return corners
 
 
-def _check_winding(corners: FloatArray, name: str) -> None:
-    """Require a strictly convex quad wound clockwise on screen (u right, v down)."""
+def is_convex_clockwise(corners: FloatArray) -> bool:
+    """Whether a quad (4, 2) is strictly convex and wound clockwise on screen (u right, v down),
+    as :class:`TagDetection` requires (and a detector reports)."""
     edges = np.roll(corners, -1, axis=0) - corners
     following = np.roll(edges, -1, axis=0)
     turns = edges[:, 0] * following[:, 1] - edges[:, 1] * following[:, 0]
-    if not (turns > 0.0).all():
+    return bool((turns > 0.0).all())
+
+
+def _check_winding(corners: FloatArray, name: str) -> None:
+    """Require a strictly convex quad wound clockwise on screen (:func:`is_convex_clockwise`)."""
+    if not is_convex_clockwise(corners):
         raise TagInputError(
             f"{name}: not a convex quadrilateral running top-left, top-right, bottom-right, "
             f"bottom-left clockwise on screen: {corners.round(2).tolist()}"
