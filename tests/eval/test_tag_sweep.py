@@ -31,7 +31,7 @@ from tagloc.eval.tag_sweep_report import (
     format_joint_csv,
     format_markdown,
 )
-from tagloc.eval.tag_sweep_stats import TagSweepRow, ViewOutcome, cell_row, pooled_nees_per_dof
+from tagloc.eval.tag_sweep_stats import TagSweepRow, ViewOutcome, cell_row
 from tagloc.eval.tag_views import rotation_error_deg, sample_board_view, sample_wall_view
 from tagloc.sim import RenderConfig, render_tags_scene
 from tagloc.tags import TagDetection, estimate_tag_pose, tag_object_points
@@ -170,7 +170,6 @@ def test_tiny_sweep_meets_the_issues_targets(tiny: TagSweepResult) -> None:
     assert all(0.05 < r.nees_per_dof < 5.0 for r in tiny.rows)
     assert all(r.nees_per_dof < 1.0 for r in tiny.rows if r.distance_m == 2.0)
     assert 0.5 <= tiny.nees_per_dof <= 2.0
-    assert tiny.nees_per_dof == pytest.approx(pooled_nees_per_dof(tiny.rows))
     assert tiny.detect_ms > 0 and tiny.rest_ms > 0
 
 

@@ -17,7 +17,11 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 if TYPE_CHECKING:
-    from tagloc.eval.summary import EvalSummary
+    from collections.abc import Sequence
+
+    from rich.table import Table
+
+    from tagloc.eval.summary import Check, EvalSummary
 
 eval_app = typer.Typer(
     help="Evaluate: localization runs against ground truth, the tag sensor by sweep.",
@@ -65,15 +69,22 @@ def print_summary(summary: EvalSummary) -> None:
         reliability = "" if e.reliability is None else f"{e.reliability.fraction:.4f}"
         false = "" if e.false_fixes_accepted is None else str(e.false_fixes_accepted)
         table.add_row(name, f"{e.ate_rmse_m:.4f}", f"{e.largest_jump_m:.3f}", false, reliability)
-    checks = Table(title="checks")
-    for column in ("check", "value", "target", "result"):
-        checks.add_column(column, justify="right")
-    for c in summary.checks:
-        result = {True: "[green]pass[/]", False: "[red]FAIL[/]", None: "n/a"}[c.passed]
-        checks.add_row(c.name, _num(c.value, 4, "g"), c.target, result)
     console = Console()
     console.print(table)
-    console.print(checks)
+    console.print(checks_table(summary.checks))
+
+
+def checks_table(checks: Sequence[Check]) -> Table:
+    """Pass/fail checks as a rich table (check, value, target, result)."""
+    from rich.table import Table
+
+    out = Table(title="checks")
+    for column in ("check", "value", "target", "result"):
+        out.add_column(column, justify="right")
+    for c in checks:
+        result = {True: "[green]pass[/]", False: "[red]FAIL[/]", None: "n/a"}[c.passed]
+        out.add_row(c.name, _num(c.value, 4, "g"), c.target, result)
+    return out
 
 
 def _num(value: float, digits: int, kind: str = "f") -> str:

@@ -7,6 +7,7 @@ The work is :func:`tagloc.eval.tag_sweep.run_tag_sweep`; the files are
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
@@ -68,56 +69,35 @@ def _sweep_config(path: Path | None, quick: bool, **overrides: Any) -> TagSweepC
 
 
 def print_tag_sweep(result: TagSweepResult) -> None:
-    """One rich table per blur/noise condition, the joint table, a summary line, the checks."""
+    """One rich table per blur/noise condition, the joint table, a summary line, the checks
+    (the cells of ``summary.md``'s tables, :mod:`tagloc.eval.tag_sweep_report`)."""
     from rich.console import Console
     from rich.table import Table
 
-    from tagloc.eval.tag_sweep_report import conditions, format_rejections
-
-    def num(value: float, digits: int, scale: float = 1.0) -> str:
-        return f"{value * scale:.{digits}f}" if value == value else "-"  # NaN -> "-"
+    from tagloc.cli.eval_cmd import checks_table
+    from tagloc.eval.tag_sweep_report import JOINT_COLUMNS, SWEEP_COLUMNS, joint_cells, sweep_cells
+    from tagloc.eval.tag_sweep_stats import conditions
 
     console = Console(width=190)
-    columns = ("dist m", "angle", "det", "acc", "pos med cm", "pos p95 cm", "rot med deg",
-               "rot p95 deg", "cam pos med cm", "flips", "NEES/dof", "corner px", "detect ms",
-               "rest ms", "rejected")  # fmt: skip
     for blur, noise in conditions(result.rows):
         table = Table(title=f"tag sweep: blur {blur:g} px, read noise {noise:g} DN")
-        for column in columns:
+        for column in SWEEP_COLUMNS:
             table.add_column(column, justify="left" if column == "rejected" else "right")
-        for r in (r for r in result.rows if (r.blur_px, r.noise_dn) == (blur, noise)):
-            table.add_row(
-                f"{r.distance_m:g}", f"{r.angle_deg:g}", num(r.detection_rate, 2),
-                num(r.acceptance_rate, 2), num(r.position_error_median_m, 2, 100),
-                num(r.position_error_p95_m, 2, 100), num(r.rotation_error_median_deg, 2),
-                num(r.rotation_error_p95_deg, 2), num(r.camera_position_error_median_m, 2, 100),
-                str(r.flips), num(r.nees_per_dof, 2),
-                num(r.corner_rms_px, 2), num(r.detect_ms, 1), num(r.rest_ms, 1),
-                format_rejections(r.rejections),
-            )  # fmt: skip
+        for r in result.rows:
+            if (r.blur_px, r.noise_dn) == (blur, noise):
+                table.add_row(*sweep_cells(r))
         console.print(table)
     if result.joint_rows:
         joint = Table(title="joint PnP, face-on (reference condition)")
-        for column in ("tags", "dist m", "joint acc", "rot med deg", "rot p95 deg",
-                       "pos med cm", "best single rot med deg", "NEES/dof"):  # fmt: skip
+        for column in JOINT_COLUMNS:
             joint.add_column(column, justify="right")
         for j in result.joint_rows:
-            joint.add_row(
-                str(j.n_tags), f"{j.distance_m:g}", num(j.joint_rate, 2),
-                num(j.rotation_error_median_deg, 2), num(j.rotation_error_p95_deg, 2),
-                num(j.position_error_median_m, 2, 100), num(j.best_single_rotation_median_deg, 2),
-                num(j.nees_per_dof, 2),
-            )  # fmt: skip
+            joint.add_row(*joint_cells(j))
         console.print(joint)
+    nees = f"{result.nees_per_dof:.2f}" if math.isfinite(result.nees_per_dof) else "-"
     console.print(
         f"{result.n_views} views in {result.elapsed_s:.0f} s, flips {result.flips}, "
-        f"NEES/dof {num(result.nees_per_dof, 2)}, per frame: detection {result.detect_ms:.1f} ms,"
+        f"NEES/dof {nees}, per frame: detection {result.detect_ms:.1f} ms,"
         f" PnP + covariance + gates {result.rest_ms:.2f} ms"
     )
-    checks = Table(title="checks")
-    for column in ("check", "value", "target", "result"):
-        checks.add_column(column, justify="right")
-    for c in result.checks:
-        passed = {True: "[green]pass[/]", False: "[red]FAIL[/]", None: "n/a"}[c.passed]
-        checks.add_row(c.name, f"{c.value:.4g}" if c.value == c.value else "n/a", c.target, passed)
-    console.print(checks)
+    console.print(checks_table(result.checks))

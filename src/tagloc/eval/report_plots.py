@@ -18,7 +18,8 @@ COLORS = {"truth": "tab:green", "odometry": "tab:red", "fused": "tab:blue", "bas
 _MAX_POINTS = 6000  # plotted samples per series (decimated evenly)
 
 
-def _pyplot() -> Any:
+def pyplot() -> Any:
+    """``matplotlib.pyplot`` on the non-interactive Agg backend."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -30,7 +31,7 @@ def _pyplot() -> Any:
 def _png(fig: Any) -> bytes:
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png")
-    _pyplot().close(fig)
+    pyplot().close(fig)
     return buffer.getvalue()
 
 
@@ -40,7 +41,7 @@ def _every(n: int) -> slice:
 
 def trajectories_png(ev: Evaluation) -> bytes:
     """Top-down ``x, y`` in ``map`` of truth, odometry, fused and baseline, m."""
-    plt = _pyplot()
+    plt = pyplot()
     traj = ev.trajectories
     paths = {"truth": traj.T_map_base_truth, **traj.estimates()}
     fig, ax = plt.subplots(figsize=(10, 6.5), dpi=100)
@@ -64,7 +65,7 @@ def trajectories_png(ev: Evaluation) -> bytes:
 
 def errors_over_time_png(ev: Evaluation) -> bytes:
     """Position error (m, log scale) and rotation error (deg) against time, per estimate."""
-    plt = _pyplot()
+    plt = pyplot()
     traj = ev.trajectories
     t_s = (traj.stamps_ns - traj.stamps_ns[0]) * 1e-9
     step = _every(len(t_s))
@@ -94,7 +95,7 @@ def errors_over_time_png(ev: Evaluation) -> bytes:
 
 def error_histogram_png(ev: Evaluation) -> bytes:
     """Histograms (log-spaced bins) of the fused and baseline position error, m."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(10, 4), dpi=100)
     bins = np.logspace(-4, 1.5, 56)
     for name in ("baseline", "fused"):
@@ -112,7 +113,7 @@ def error_histogram_png(ev: Evaluation) -> bytes:
 
 def acceptance_png(ev: Evaluation) -> bytes:
     """Fraction of fix attempts accepted against range (m) and viewing angle (deg)."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), dpi=100)
     tables = (
         (ev.summary.acceptance_vs_range, "range to tag (m)"),
@@ -140,7 +141,7 @@ def _acceptance_bars(ax: Any, bins: list[AcceptanceBin], label: str) -> None:
 
 def jumps_png(ev: Evaluation) -> bytes:
     """Per-step change of ``T_map_base`` caused by the correction (m), fused vs baseline."""
-    plt = _pyplot()
+    plt = pyplot()
     traj = ev.trajectories
     t_s = (traj.stamps_ns[1:] - traj.stamps_ns[0]) * 1e-9
     fig, ax = plt.subplots(figsize=(10, 3.5), dpi=100)

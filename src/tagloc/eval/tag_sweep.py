@@ -33,7 +33,13 @@ import numpy as np
 from tagloc.eval.summary import Check
 from tagloc.eval.tag_sweep_config import TagSweepConfig
 from tagloc.eval.tag_sweep_joint import JointRow, joint_cell, joint_checks
-from tagloc.eval.tag_sweep_stats import TagSweepRow, ViewOutcome, cell_row, sweep_checks
+from tagloc.eval.tag_sweep_stats import (
+    TagSweepRow,
+    ViewOutcome,
+    cell_row,
+    pooled_nees_per_dof,
+    sweep_checks,
+)
 from tagloc.eval.tag_views import SweepStack, pose_prior, rotation_error_deg, sample_wall_view
 from tagloc.geometry import SE3
 from tagloc.sim.render import render_tags_scene
@@ -76,8 +82,6 @@ class TagSweepResult:
     checks : tuple of Check
         The issue's targets (:func:`tagloc.eval.tag_sweep_stats.sweep_checks`, then
         :func:`tagloc.eval.tag_sweep_joint.joint_checks`).
-    nees_per_dof : float
-        Mean NEES / 6 over every accepted estimate of the sweep (NaN if none).
     detect_ms, rest_ms : float
         Median per-frame time of detection over every frame of the sweep, and of everything
         after it (``observe_tags``) over the frames with a detection, milliseconds.
@@ -89,10 +93,14 @@ class TagSweepResult:
     rows: tuple[TagSweepRow, ...]
     joint_rows: tuple[JointRow, ...]
     checks: tuple[Check, ...]
-    nees_per_dof: float
     detect_ms: float
     rest_ms: float
     elapsed_s: float
+
+    @property
+    def nees_per_dof(self) -> float:
+        """Mean NEES / 6 over every accepted single-tag estimate of the sweep (NaN if none)."""
+        return pooled_nees_per_dof(self.rows)
 
     @property
     def n_views(self) -> int:
@@ -237,7 +245,6 @@ def run_tag_sweep(config: TagSweepConfig, progress: ProgressFn | None = None) ->
         joint_rows.append(joint_cell(stack, n_tags, distance, seeds))
         if progress is not None:
             progress((len(cells) + j + 1) * config.trials, total)
-    accepted_nees = [v.nees for v in views if v.accepted]
     targets = config.targets
     checks = sweep_checks(config, rows) + joint_checks(
         joint_rows, targets.joint_rotation_median_deg, targets.joint_rotation_distance_m
@@ -247,7 +254,6 @@ def run_tag_sweep(config: TagSweepConfig, progress: ProgressFn | None = None) ->
         rows=tuple(rows),
         joint_rows=tuple(joint_rows),
         checks=tuple(checks),
-        nees_per_dof=float(np.mean(accepted_nees)) / 6.0 if accepted_nees else float("nan"),
         detect_ms=1e3 * float(np.median([v.detect_s for v in views])),
         rest_ms=1e3 * float(np.median([v.rest_s for v in views if v.detected] or [np.nan])),
         elapsed_s=time.perf_counter() - started,

@@ -158,11 +158,6 @@ class TagSweepConfig(BaseModel):
                 raise ValueError(f"value {v:g} outside [{low:g}, {high:g}] (or leave it empty)")
         return tuple(sorted(set(values)))
 
-    @classmethod
-    def quick(cls, **overrides: Any) -> TagSweepConfig:
-        """The default sweep with the :data:`QUICK_GRID` (seconds long), then ``overrides``."""
-        return cls(**{**QUICK_GRID, **overrides})
-
     @property
     def reference_condition(self) -> tuple[float, float]:
         """``(blur_px, noise_dn)`` of the sharpest, least noisy cells."""

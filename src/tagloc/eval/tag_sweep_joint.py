@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tagloc.eval.summary import Check
+from tagloc.eval.tag_sweep_stats import percentile_or_nan
 from tagloc.eval.tag_views import SweepStack, pose_prior, rotation_error_deg, sample_board_view
 from tagloc.sim.render import render_tags_scene
 from tagloc.tags import estimate_tag_poses, nees, observe_tags
@@ -54,10 +55,6 @@ class JointRow:
     position_error_median_m: float
     best_single_rotation_median_deg: float
     nees_per_dof: float
-
-
-def _percentile(values: list[float], q: float) -> float:
-    return float(np.percentile(values, q)) if values else math.nan
 
 
 def joint_cell(
@@ -118,10 +115,10 @@ def joint_cell(
         distance_m=distance_m,
         n_views=len(seeds),
         joint_rate=len(joint_rot) / len(seeds) if seeds else math.nan,
-        rotation_error_median_deg=_percentile(joint_rot, 50),
-        rotation_error_p95_deg=_percentile(joint_rot, 95),
-        position_error_median_m=_percentile(joint_pos, 50),
-        best_single_rotation_median_deg=_percentile(single_rot, 50),
+        rotation_error_median_deg=percentile_or_nan(joint_rot, 50),
+        rotation_error_p95_deg=percentile_or_nan(joint_rot, 95),
+        position_error_median_m=percentile_or_nan(joint_pos, 50),
+        best_single_rotation_median_deg=percentile_or_nan(single_rot, 50),
         nees_per_dof=float(np.mean(joint_nees)) / 6.0 if joint_nees else math.nan,
     )
 

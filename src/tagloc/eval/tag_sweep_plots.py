@@ -10,25 +10,12 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from typing import Any
 
 import numpy as np
 
-from tagloc.eval.tag_sweep_stats import TagSweepRow
+from tagloc.eval.report_plots import pyplot
+from tagloc.eval.tag_sweep_stats import TagSweepRow, conditions
 from tagloc.fileutil import atomic_path
-
-
-def _pyplot() -> Any:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def _conditions(rows: Sequence[TagSweepRow]) -> list[tuple[float, float]]:
-    return list(dict.fromkeys((r.blur_px, r.noise_dn) for r in rows))
 
 
 def _label(blur: float, noise: float) -> str:
@@ -44,8 +31,8 @@ def plot_tag_sweep_errors(rows: Sequence[TagSweepRow], path: str | os.PathLike[s
     path : path-like
         Output PNG, written atomically.
     """
-    plt = _pyplot()
-    conds = _conditions(rows)
+    plt = pyplot()
+    conds = conditions(rows)
     angles = sorted({r.angle_deg for r in rows})
     fig, axes = plt.subplots(len(conds), 2, figsize=(11, 3.2 * len(conds)), squeeze=False)
     for i, (blur, noise) in enumerate(conds):
@@ -81,8 +68,8 @@ def plot_tag_sweep_rates(rows: Sequence[TagSweepRow], path: str | os.PathLike[st
     path : path-like
         Output PNG, written atomically.
     """
-    plt = _pyplot()
-    conds = _conditions(rows)
+    plt = pyplot()
+    conds = conditions(rows)
     distances = sorted({r.distance_m for r in rows})
     angles = sorted({r.angle_deg for r in rows})
     fig, axes = plt.subplots(

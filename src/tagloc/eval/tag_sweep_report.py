@@ -29,7 +29,7 @@ from tagloc.eval.summary import Check
 from tagloc.eval.tag_sweep import JointRow, TagSweepResult
 from tagloc.eval.tag_sweep_config import save_tag_sweep_config
 from tagloc.eval.tag_sweep_plots import plot_tag_sweep_errors, plot_tag_sweep_rates
-from tagloc.eval.tag_sweep_stats import TagSweepRow
+from tagloc.eval.tag_sweep_stats import TagSweepRow, conditions
 from tagloc.fileutil import atomic_write_text
 
 #: Files :func:`write_tag_sweep` writes, in order.
@@ -92,43 +92,54 @@ def format_joint_csv(rows: Sequence[JointRow]) -> str:
     return buffer.getvalue()
 
 
+#: Columns of :func:`sweep_cells` (the module docstring says what each means).
+SWEEP_COLUMNS = (
+    "dist (m)", "angle (deg)", "det", "acc", "pos med (cm)", "pos p95 (cm)", "rot med (deg)",
+    "rot p95 (deg)", "cam pos med (cm)", "flips", "NEES/dof", "corner px", "detect (ms)",
+    "rest (ms)", "rejected",
+)  # fmt: skip
+#: Columns of :func:`joint_cells`.
+JOINT_COLUMNS = (
+    "tags", "dist (m)", "joint acc", "rot med (deg)", "rot p95 (deg)", "pos med (cm)",
+    "best single rot med (deg)", "NEES/dof",
+)  # fmt: skip
+
+
+def sweep_cells(r: TagSweepRow) -> list[str]:
+    """One sweep cell as text, in :data:`SWEEP_COLUMNS` order (markdown and terminal)."""
+    return [
+        f"{r.distance_m:g}", f"{r.angle_deg:g}", _num(r.detection_rate, 2),
+        _num(r.acceptance_rate, 2), _num(r.position_error_median_m, 2, 100),
+        _num(r.position_error_p95_m, 2, 100), _num(r.rotation_error_median_deg, 2),
+        _num(r.rotation_error_p95_deg, 2), _num(r.camera_position_error_median_m, 2, 100),
+        str(r.flips), _num(r.nees_per_dof, 2), _num(r.corner_rms_px, 2), _num(r.detect_ms, 1),
+        _num(r.rest_ms, 1), format_rejections(r.rejections),
+    ]  # fmt: skip
+
+
+def joint_cells(r: JointRow) -> list[str]:
+    """One joint-PnP cell as text, in :data:`JOINT_COLUMNS` order."""
+    return [
+        str(r.n_tags), f"{r.distance_m:g}", _num(r.joint_rate, 2),
+        _num(r.rotation_error_median_deg, 2), _num(r.rotation_error_p95_deg, 2),
+        _num(r.position_error_median_m, 2, 100), _num(r.best_single_rotation_median_deg, 2),
+        _num(r.nees_per_dof, 2),
+    ]  # fmt: skip
+
+
+def _markdown(columns: Sequence[str], aligns: Sequence[str], rows: list[list[str]]) -> list[str]:
+    lines = ["| " + " | ".join(columns) + " |", "|" + "".join(aligns)]
+    return lines + ["| " + " | ".join(cells) + " |" for cells in rows]
+
+
 def joint_markdown_table(rows: Sequence[JointRow]) -> list[str]:
     """The joint cells as markdown table lines."""
-    lines = [
-        "| tags | dist (m) | joint acc | rot med (deg) | rot p95 (deg) | pos med (cm) "
-        "| best single rot med (deg) | NEES/dof |",
-        "|" + "---:|" * 8,
-    ]
-    for r in rows:
-        lines.append(
-            f"| {r.n_tags} | {r.distance_m:g} | {_num(r.joint_rate, 2)} "
-            f"| {_num(r.rotation_error_median_deg, 2)} | {_num(r.rotation_error_p95_deg, 2)} "
-            f"| {_num(r.position_error_median_m, 2, 100)} "
-            f"| {_num(r.best_single_rotation_median_deg, 2)} | {_num(r.nees_per_dof, 2)} |"
-        )
-    return lines
+    return _markdown(JOINT_COLUMNS, ["---:|"] * 8, [joint_cells(r) for r in rows])
 
 
 def markdown_table(rows: Sequence[TagSweepRow]) -> list[str]:
     """The rows of one condition as markdown table lines (columns in the module docstring)."""
-    lines = [
-        "| dist (m) | angle (deg) | det | acc | pos med (cm) | pos p95 (cm) | rot med (deg) "
-        "| rot p95 (deg) | cam pos med (cm) | flips | NEES/dof | corner px | detect (ms) "
-        "| rest (ms) | rejected |",
-        "|" + "---:|" * 14 + "---|",
-    ]
-    for r in rows:
-        lines.append(
-            f"| {r.distance_m:g} | {r.angle_deg:g} | {_num(r.detection_rate, 2)} "
-            f"| {_num(r.acceptance_rate, 2)} | {_num(r.position_error_median_m, 2, 100)} "
-            f"| {_num(r.position_error_p95_m, 2, 100)} | {_num(r.rotation_error_median_deg, 2)} "
-            f"| {_num(r.rotation_error_p95_deg, 2)} "
-            f"| {_num(r.camera_position_error_median_m, 2, 100)} | {r.flips} "
-            f"| {_num(r.nees_per_dof, 2)} "
-            f"| {_num(r.corner_rms_px, 2)} | {_num(r.detect_ms, 1)} | {_num(r.rest_ms, 1)} "
-            f"| {format_rejections(r.rejections)} |"
-        )
-    return lines
+    return _markdown(SWEEP_COLUMNS, ["---:|"] * 14 + ["---|"], [sweep_cells(r) for r in rows])
 
 
 def check_lines(checks: Sequence[Check]) -> list[str]:
@@ -139,11 +150,6 @@ def check_lines(checks: Sequence[Check]) -> list[str]:
         result = {True: "pass", False: "**FAIL**", None: "n/a"}[c.passed]
         lines.append(f"| {c.name} | {value} | {c.target} | {result} |")
     return lines
-
-
-def conditions(rows: Sequence[TagSweepRow]) -> list[tuple[float, float]]:
-    """The sweep's ``(blur_px, noise_dn)`` conditions in row order."""
-    return list(dict.fromkeys((r.blur_px, r.noise_dn) for r in rows))
 
 
 def format_markdown(result: TagSweepResult) -> str:

@@ -138,7 +138,8 @@ class TagSweepRow:
     rejections: tuple[tuple[str, int], ...]
 
 
-def _stat(values: list[float], q: float) -> float:
+def percentile_or_nan(values: list[float], q: float) -> float:
+    """``np.percentile(values, q)``, NaN for no values."""
     return float(np.percentile(values, q)) if values else math.nan
 
 
@@ -168,12 +169,12 @@ def cell_row(
         n_accepted=len(accepted),
         detection_rate=n_detected / n if n else math.nan,
         acceptance_rate=len(accepted) / n if n else math.nan,
-        position_error_median_m=_stat(position, 50),
-        position_error_p95_m=_stat(position, 95),
-        rotation_error_median_deg=_stat(rotation, 50),
-        rotation_error_p95_deg=_stat(rotation, 95),
-        camera_position_error_median_m=_stat(camera, 50),
-        camera_position_error_p95_m=_stat(camera, 95),
+        position_error_median_m=percentile_or_nan(position, 50),
+        position_error_p95_m=percentile_or_nan(position, 95),
+        rotation_error_median_deg=percentile_or_nan(rotation, 50),
+        rotation_error_p95_deg=percentile_or_nan(rotation, 95),
+        camera_position_error_median_m=percentile_or_nan(camera, 50),
+        camera_position_error_p95_m=percentile_or_nan(camera, 95),
         flips=sum(v.flip for v in accepted),
         nees_per_dof=float(np.mean([v.nees for v in accepted])) / POSE_DOF
         if accepted
@@ -275,3 +276,8 @@ def sweep_checks(config: TagSweepConfig, rows: Sequence[TagSweepRow]) -> list[Ch
         )
     )
     return checks
+
+
+def conditions(rows: Sequence[TagSweepRow]) -> list[tuple[float, float]]:
+    """The sweep's ``(blur_px, noise_dn)`` conditions in row order."""
+    return list(dict.fromkeys((r.blur_px, r.noise_dn) for r in rows))
