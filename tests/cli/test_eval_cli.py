@@ -3,23 +3,15 @@
 from __future__ import annotations
 
 import json
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from cli_runner import run_tagloc
+from cli_runner import one_error_line, run_tagloc
 from tagloc.eval.compare import compare_trajectories
 from tagloc.geometry import SE3
 from tagloc.io import read_tum, write_tum
-
-
-def _one_error_line(done: subprocess.CompletedProcess[str]) -> str:
-    assert done.returncode == 1, done.stderr
-    lines = done.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("tagloc: error: "), done.stderr
-    return lines[0]
 
 
 def test_eval_run_writes_the_report(tmp_path: Path) -> None:
@@ -56,16 +48,16 @@ def test_eval_files_matches_the_pure_function(tmp_path: Path) -> None:
 
 
 def test_errors_are_one_line(tmp_path: Path) -> None:
-    assert "unknown scenario" in _one_error_line(
+    assert "unknown scenario" in one_error_line(
         run_tagloc("eval", "run", "--scenario", "no_such_scenario", "--out", str(tmp_path))
     )
     missing = tmp_path / "missing.tum"
-    assert "missing.tum" in _one_error_line(
+    assert "missing.tum" in one_error_line(
         run_tagloc("eval", "files", "--truth", str(missing), "--est", str(missing))
     )
     (tmp_path / "a.tum").write_text("0.0 0 0 0 0 0 0 1\n")
     far = tmp_path / "b.tum"
     write_tum(far, np.array([5_000_000_000, 6_000_000_000]), SE3.identity(2))
-    line = _one_error_line(run_tagloc("eval", "files", "--truth", str(tmp_path / "a.tum"),
+    line = one_error_line(run_tagloc("eval", "files", "--truth", str(tmp_path / "a.tum"),
                                    "--est", str(far)))  # fmt: skip
     assert "associate" in line or "poses" in line

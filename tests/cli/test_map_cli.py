@@ -37,7 +37,6 @@ DIFF_LINES = [  # sorted by (family, id)
 ]
 
 
-
 @pytest.fixture
 def maps(tmp_path: Path) -> tuple[Path, Path, Path]:
     good, new, bad = tmp_path / "tags.yaml", tmp_path / "new.yaml", tmp_path / "bad.yaml"
@@ -87,8 +86,7 @@ def test_diff_prints_changes_and_exits_0_or_1_with_exit_code(
 def test_map_is_wired_into_the_tagloc_command(maps: tuple[Path, Path, Path]) -> None:
     from tagloc.cli.app import app
 
-    if not any(g.typer_instance is map_app for g in app.registered_groups):
-        pytest.skip("map_app is not yet added to tagloc.cli.app (app.add_typer(map_app, 'map'))")
+    assert any(g.typer_instance is map_app for g in app.registered_groups)
     good, _, _ = maps
     result = run_tagloc("map", "check", str(good))
     assert result.returncode == 0 and SUMMARY in result.stdout
