@@ -16,6 +16,8 @@ from tagloc.mapping.calibration import (
     apply_calibration,
     calibration_from_vector,
     calibration_vector,
+    corrected_step_jacobians,
+    corrected_steps,
     fit_calibration,
 )
 from tagloc.mapping.corner_graph import corner_jacobians, gross_outliers, linearize_corners
@@ -23,7 +25,7 @@ from tagloc.mapping.graph import odometry_sigmas
 from tagloc.mapping.gtsam_bridge import cov_from_gtsam, cov_to_gtsam, from_pose3, to_pose3
 from tagloc.mapping.initialize import consensus_rotation, inverse_h
 from tagloc.mapping.observations import collect_observations, interpolate_odometry
-from tagloc.mapping.odometry_factors import linearize_odometry, odometry_residuals
+from tagloc.mapping.odometry_factors import linearize_odometry, log_batch, odometry_residuals
 from tagloc.mapping.sim_survey import odometry_noise_of, survey_from_drive
 from tagloc.sim import ObservationConfig, World, load_default_world, simulate_drive
 from tagloc.sim.odometry import simulate_odometry
@@ -112,6 +114,25 @@ def test_odometry_jacobians_match_numerical_differences() -> None:
         assert np.allclose(J[k], A_prev[k], atol=1e-5)
     J_c = _numeric_jacobian(lambda d: odometry_residuals(M_map_base, step, c + d, sigmas), 4)
     assert np.allclose(J_c, A_c, atol=1e-5)
+
+
+def test_calibration_derivative_matches_central_differences() -> None:
+    rng = np.random.default_rng(3)
+    n = 500
+    rotvec = rng.normal(size=(n, 3)) * [0.05, 0.05, 0.8]
+    step = SE3.from_rotvec(rotvec, rng.normal(size=(n, 3)) * [0.5, 0.2, 0.05]).as_matrix()
+    c = rng.normal(size=N_CALIBRATION) * 0.05
+    Z = corrected_steps(step, calibration_from_vector(c))
+    h = 1e-6
+    numeric = np.empty((n, 6, N_CALIBRATION))
+    for i in range(N_CALIBRATION):
+        dc = np.zeros(N_CALIBRATION)
+        dc[i] = h
+        plus = corrected_steps(step, calibration_from_vector(c + dc))
+        minus = corrected_steps(step, calibration_from_vector(c - dc))
+        Z_inv = inverse_h(Z)
+        numeric[..., i] = (log_batch(Z_inv @ plus) - log_batch(Z_inv @ minus)) / (2 * h)
+    assert np.abs(corrected_step_jacobians(step, Z) - numeric).max() < 1e-8
 
 
 def test_corner_jacobians_match_numerical_differences() -> None:

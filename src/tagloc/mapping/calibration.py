@@ -112,6 +112,29 @@ def corrected_steps(step: FloatArray, cal: OdometryCalibration) -> FloatArray:
     return fixed
 
 
+def corrected_step_jacobians(step: FloatArray, fixed: FloatArray) -> FloatArray:
+    """``(K-1, 6, 4)`` right-tangent derivative ``D`` of :func:`corrected_steps` in the
+    calibration vector: ``Log(Z^-1 Z(c + dc)) = D dc`` (exact to first order).
+
+    ``step`` are the raw steps, ``fixed = Z(c)`` the corrected ones (rotation ``R_Z``). ``c``
+    moves ``Z``'s translation by ``t dscale + d y_hat dlateral`` and turns it about the earlier
+    keyframe's z by ``yaw dturn + d dbias``, so ``D = blockdiag(R_Z^T, R_Z^T) G`` with ``G`` the
+    ``[x, y, z, rx, ry, rz]`` change per parameter (``t``, ``d``, ``yaw`` of the raw step).
+    """
+    t = step[:, :3, 3]
+    dist = np.linalg.norm(t, axis=1)
+    G = np.zeros((len(step), 6, N_CALIBRATION))
+    G[:, :3, 0] = t
+    G[:, 1, 1] = dist
+    G[:, 5, 2] = _yaw(step[:, :3, :3])
+    G[:, 5, 3] = dist
+    R_T = np.swapaxes(fixed[:, :3, :3], 1, 2)
+    D = np.empty_like(G)
+    D[:, :3] = R_T @ G[:, :3]
+    D[:, 3:] = R_T @ G[:, 3:]
+    return D
+
+
 def apply_calibration(M_odom_base: FloatArray, cal: OdometryCalibration) -> FloatArray:
     """``(K, 4, 4)`` odometry recomposed from calibrated steps, from the same first pose."""
     fixed = corrected_steps(inverse_h(M_odom_base[:-1]) @ M_odom_base[1:], cal)

@@ -15,7 +15,7 @@ yaw bias per metre) and ``sigma_k`` the random-walk noise of
 
 - ``d e / d xi_k = J``; ``d e / d xi_{k-1} = -J Ad(B^-1)``;
 - ``d e / d c = -J Ad(E^-1) D`` with ``D`` the right-tangent derivative of ``Z`` in ``c``
-  (central differences, vectorized over all steps).
+  (analytic: :func:`~tagloc.mapping.calibration.corrected_step_jacobians`).
 
 Estimating ``c`` jointly with the map, instead of alternating fit and optimization, removes the
 systematic part of legged odometry drift that alternation leaves behind (it converges slowly
@@ -29,13 +29,16 @@ import numpy.typing as npt
 
 from tagloc.errors import GeometryError
 from tagloc.geometry import SE3
-from tagloc.mapping.calibration import N_CALIBRATION, calibration_from_vector, corrected_steps
+from tagloc.mapping.calibration import (
+    N_CALIBRATION,
+    calibration_from_vector,
+    corrected_step_jacobians,
+    corrected_steps,
+)
 from tagloc.mapping.initialize import inverse_h
 from tagloc.mapping.observations import hat
 
 FloatArray = npt.NDArray[np.float64]
-#: Central-difference step for ``d Z / d c``.
-_H = 1e-6
 
 
 def log_batch(M: FloatArray) -> FloatArray:
@@ -87,7 +90,7 @@ def linearize_odometry(
     M_map_base : (K, 4, 4) float
     step_raw : (K-1, 4, 4) float
         Raw odometry steps ``T_odom_base_{k-1}^-1 T_odom_base_k``.
-    c : (6,) float
+    c : (4,) float
         Calibration vector (:func:`~tagloc.mapping.calibration.calibration_vector`).
     sigmas : (K-1, 6) float
     calibrate : bool
@@ -98,7 +101,7 @@ def linearize_odometry(
     e : (K-1, 6) float
     A_prev, A_next : (K-1, 6, 6) float
         ``d e / d xi`` of keyframes ``k-1`` and ``k``.
-    A_c : (K-1, 6, 6) float or None
+    A_c : (K-1, 6, 4) float or None
     """
     if len(step_raw) == 0:  # a single keyframe
         empty = np.zeros((0, 6, 6))
@@ -117,14 +120,7 @@ def linearize_odometry(
     A_prev = -(J_e_E @ adjoint(inverse_h(B))) * whiten
     if not calibrate:
         return e / sigmas, A_prev, A_next, None
-    Z_inv = inverse_h(Z)
-    D = np.empty((len(Z), 6, N_CALIBRATION))
-    for i in range(N_CALIBRATION):
-        dc = np.zeros(N_CALIBRATION)
-        dc[i] = _H
-        Z_plus = corrected_steps(step_raw, calibration_from_vector(c + dc))
-        Z_minus = corrected_steps(step_raw, calibration_from_vector(c - dc))
-        D[:, :, i] = (log_batch(Z_inv @ Z_plus) - log_batch(Z_inv @ Z_minus)) / (2 * _H)
+    D = corrected_step_jacobians(step_raw, Z)
     A_c = -(J_e_E @ adjoint(inverse_h(E)) @ D) * whiten
     return e / sigmas, A_prev, A_next, A_c
 
