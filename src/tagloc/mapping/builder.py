@@ -53,6 +53,7 @@ from tagloc.mapping.graph import (
     GraphInput,
     GraphSolution,
     build_graph,
+    held_tags,
     marginal_covariances,
     solve_graph,
 )
@@ -190,7 +191,7 @@ def build_tag_map(
     timings["pose_rounds"] = time.perf_counter() - t
     t_refine = time.perf_counter()
     ambiguous: list[int] = []
-    held = M_anchor or {int(obs.tag[0]): M_map_tag[int(obs.tag[0])]}
+    held = held_tags(M_anchor, obs.tag, M_map_tag)
     state = State(M_map_base, M_map_tag, calibration_vector(calibration))
     if config.factors == "corners":
         solution, state, ambiguous = refine_and_test_tilts(

@@ -9,12 +9,13 @@ pose-factor solution with the corners themselves: it minimizes
    \\rVert^2\\right) + \\text{odometry} + \\text{anchors}
 
 (``rho`` the robust kernel on each corner's 2-D residual, through the real camera model).
-This module linearizes the corners: residuals and Jacobians of every observation, the kernel's
-IRLS weights and the capped robust cost; :mod:`tagloc.mapping.refine` runs the Gauss-Newton
-rounds. An observation whose corners are off by more than :data:`GROSS_CHI` (whitened norm) is
-a false detection and pulls nothing: the Cauchy kernel's cost still decreases when the map moves
-towards a detection hundreds of pixels off, and on the simulated office with 5 % glints that
-folded the map (tag RMS 0.19 m -> 0.61 m) until the cost was capped.
+This module linearizes the corners: residuals and Jacobians of every observation, the robust
+kernel's cost and IRLS weights (:func:`kernel_cost`, :func:`kernel_weights`, also used for the
+odometry and the tilt test) and the capped robust cost; :mod:`tagloc.mapping.refine` runs the
+Gauss-Newton rounds. An observation whose corners are off by more than :data:`GROSS_CHI`
+(whitened norm) is a false detection and pulls nothing: the Cauchy kernel's cost still decreases
+when the map moves towards a detection hundreds of pixels off, and on the simulated office with
+5 % glints that folded the map (tag RMS 0.19 m -> 0.61 m) until the cost was capped.
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ GROSS_CHI = 200.0
 #: ... and exceeds this multiple of the median over its tag's observations.
 GROSS_RELATIVE = 5.0
 #: Whitened squared residual of a corner that does not project (behind the camera).
-_UNPROJECTED = 1e6
+UNPROJECTED = 1e6
 
 
 def linearize_corners(
@@ -104,8 +105,16 @@ def linearize_corners(
     return r, J_r_xi, M_base_tag
 
 
+def corner_squares(r: FloatArray) -> FloatArray:
+    """``(..., 4)`` whitened squared norm of each corner's 2-D residual ``r (..., 4, 2)``;
+    :data:`UNPROJECTED` where it does not project."""
+    s = np.sum(r**2, axis=-1)
+    return np.asarray(np.where(np.isfinite(s), s, UNPROJECTED))
+
+
 def kernel_weights(s: FloatArray, kind: str, k: float) -> FloatArray:
-    """IRLS weights ``rho'(s)`` of whitened squared residuals ``s`` (NaN: weight 0)."""
+    """IRLS weights ``rho'(s)`` of whitened squared residuals ``s`` (NaN: weight 0), for the
+    cost :func:`kernel_cost`."""
     ok = np.isfinite(s)
     s0 = np.where(ok, s, 0.0)
     if kind == "huber":
@@ -119,14 +128,15 @@ def corner_cost(r: FloatArray, kind: str, k: float) -> FloatArray:
     """``(M,)`` robust cost ``sum_i rho(s_i)`` (``rho`` ~ ``s / 2`` for small ``s``) of each
     observation's corners, capped at the cost of :data:`GROSS_CHI` (beyond it an observation
     pulls no more: a false detection)."""
-    s = np.sum(r**2, axis=2)
-    s = np.where(np.isfinite(s), s, _UNPROJECTED)
-    cap = 4.0 * _rho(np.array(GROSS_CHI**2 / 4.0), kind, k)
-    return np.asarray(np.minimum(np.sum(_rho(s, kind, k), axis=1), cap))
+    s = corner_squares(r)
+    cap = 4.0 * kernel_cost(np.array(GROSS_CHI**2 / 4.0), kind, k)
+    return np.asarray(np.minimum(np.sum(kernel_cost(s, kind, k), axis=1), cap))
 
 
-def _rho(s: FloatArray, kind: str, k: float) -> FloatArray:
-    """Half the kernel's cost of whitened squared residuals ``s`` (``s / 2`` for small ``s``)."""
+def kernel_cost(s: FloatArray, kind: str, k: float) -> FloatArray:
+    """``rho(s)``: half the robust kernel's cost of whitened squared residuals ``s`` (``s / 2``
+    for small ``s``; ``kind`` ``"huber"`` or ``"cauchy"``, width ``k`` sigmas). Its derivative
+    is :func:`kernel_weights`."""
     if kind == "huber":
         a = np.sqrt(s)
         return np.asarray(np.where(a <= k, 0.5 * s, k * a - 0.5 * k**2))
@@ -170,5 +180,4 @@ def corner_jacobians(
 
 def corner_chi(r: FloatArray) -> FloatArray:
     """``(M,)`` whitened norm of each observation's 8 corner residuals (no kernel)."""
-    s = np.sum(r**2, axis=2)
-    return np.asarray(np.sqrt(np.sum(np.where(np.isfinite(s), s, _UNPROJECTED), axis=1)))
+    return np.asarray(np.sqrt(np.sum(corner_squares(r), axis=1)))

@@ -137,6 +137,17 @@ def _pose3(M: FloatArray) -> gtsam.Pose3:
     return gtsam.Pose3(gtsam.Rot3(M[:3, :3]), M[:3, 3])
 
 
+def held_tags(
+    anchors: Mapping[int, FloatArray], tag: IntArray, M_map_tag: Mapping[int, FloatArray]
+) -> dict[int, FloatArray]:
+    """Tags held by priors: the anchors, or without anchors the first observed tag (``tag[0]``,
+    at ``M_map_tag``) as the origin."""
+    if anchors:
+        return dict(anchors)
+    first = int(tag[0])
+    return {first: M_map_tag[first]}
+
+
 def add_odometry_and_anchors(
     graph: gtsam.NonlinearFactorGraph, data: GraphInput, config: MapBuildConfig
 ) -> None:
@@ -152,8 +163,7 @@ def add_odometry_and_anchors(
             model = gtsam.noiseModel.Robust.Create(odo_kernel, model)
         graph.add(gtsam.BetweenFactorPose3(X(k), X(k + 1), _pose3(M), model))
     sigmas = [config.anchor_sigma_m] * 3 + [config.anchor_sigma_rad] * 3
-    anchors = dict(data.M_map_anchor) or {int(data.tag[0]): data.M_map_tag_init[int(data.tag[0])]}
-    for j, M in anchors.items():
+    for j, M in held_tags(data.M_map_anchor, data.tag, data.M_map_tag_init).items():
         graph.add(gtsam.PriorFactorPose3(L(j), _pose3(M), diagonal_sigmas(sigmas)))
 
 
@@ -203,7 +213,8 @@ def marginal_covariances(solution: GraphSolution) -> GraphSolution:
     """``solution`` with the marginal covariance of every tag (``gtsam.Marginals``)."""
     start = time.perf_counter()
     if solution.linear is not None:  # already in tagloc order
-        marginals = gtsam.Marginals(solution.linear, solution.linear.optimize())
+        # the solution only labels the variables: elimination does not need it
+        marginals = gtsam.Marginals(solution.linear, gtsam.VectorValues())
         cov = {j: marginals.marginalCovariance(L(j)) for j in solution.M_map_tag}
     else:
         marginals = gtsam.Marginals(solution.graph, solution.values)

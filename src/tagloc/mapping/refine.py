@@ -36,6 +36,8 @@ from tagloc.mapping.corner_graph import (
     corner_chi,
     corner_cost,
     corner_jacobians,
+    kernel_cost,
+    kernel_weights,
     linearize_corners,
 )
 from tagloc.mapping.flips import flip_stuck_tags
@@ -61,7 +63,7 @@ MAX_FLIP_PASSES = 2
 
 @dataclass(frozen=True, slots=True)
 class State:
-    """Keyframes ``(K, 4, 4)``, tags by index, calibration vector ``(6,)``."""
+    """Keyframes ``(K, 4, 4)``, tags by index, calibration vector ``(4,)``."""
 
     M_map_base: FloatArray
     M_map_tag: dict[int, FloatArray]
@@ -79,38 +81,43 @@ class _Problem:
         cameras: Mapping[str, CameraModel],
         T_base_cam: Mapping[str, SE3],
         config: MapBuildConfig,
-        calibrate: bool,
     ) -> None:
-        self.obs, self.held, self.config, self.calibrate = obs, dict(held), config, calibrate
+        self.obs, self.held, self.config = obs, dict(held), config
+        self.calibrate = config.joint_calibration
         self.cameras, self.T_base_cam = cameras, T_base_cam
         self.step_raw = inverse_h(M_odom_raw[:-1]) @ M_odom_raw[1:]
         self.sigmas = odometry_sigmas(M_odom_raw, config.odometry)
         self.held_sigmas = np.array([config.anchor_sigma_m] * 3 + [config.anchor_sigma_rad] * 3)
         self.kind, self.k = config.robust, config.robust_k
+        # the corners of the last state asked for: the objective of the line search's accepted
+        # step is evaluated there, and the next round linearizes there
+        self._corners: tuple[State, tuple[FloatArray, FloatArray, FloatArray]] | None = None
 
     def corners(self, state: State) -> tuple[FloatArray, FloatArray, FloatArray]:
+        if self._corners is not None and self._corners[0] is state:
+            return self._corners[1]
         tags = np.array([state.M_map_tag[int(j)] for j in self.obs.tag])
-        return linearize_corners(
+        out = linearize_corners(
             self.obs, np.arange(len(self.obs)), state.M_map_base, tags, self.cameras,
             self.T_base_cam, self.config.pnp_noise.sigma_px,
         )  # fmt: skip
+        self._corners = (state, out)
+        return out
 
     def _odometry_weights(self, e: FloatArray) -> FloatArray:
         k = self.config.odometry_robust_k
         if k is None:
             return np.ones(len(e))
-        return np.asarray(np.minimum(1.0, k / np.maximum(np.linalg.norm(e, axis=1), 1e-12)))
+        return kernel_weights(np.sum(e**2, axis=1), "huber", k)
 
     def objective(self, state: State) -> float:
         """The robust cost (corners capped, Huber or Gaussian odometry, priors)."""
         r, _, _ = self.corners(state)
         total = float(np.sum(corner_cost(r, self.kind, self.k)))
         e = odometry_residuals(state.M_map_base, self.step_raw, state.c, self.sigmas)
-        a = np.linalg.norm(e, axis=1)
+        s = np.sum(e**2, axis=1)
         k = self.config.odometry_robust_k
-        total += float(
-            np.sum(0.5 * a**2 if k is None else np.where(a <= k, 0.5 * a**2, k * a - 0.5 * k**2))
-        )
+        total += float(np.sum(0.5 * s if k is None else kernel_cost(s, "huber", k)))
         for j, M in self.held.items():
             total += 0.5 * float(
                 np.sum(prior_residuals(state.M_map_tag[j][None], M[None], self.held_sigmas) ** 2)
@@ -155,6 +162,7 @@ class _Problem:
 
 
 def _retract(state: State, delta: gtsam.VectorValues, alpha: float, calibrate: bool) -> State:
+    """``state`` moved by ``alpha delta`` (``c`` too if ``calibrate``)."""
     n_kf = len(state.M_map_base)
     d_base = np.array([delta.at(X(k)) for k in range(n_kf)])
     M_map_base = state.M_map_base @ SE3.exp(alpha * d_base).as_matrix()
@@ -183,7 +191,6 @@ def refine_with_corners(
     cameras: Mapping[str, CameraModel],
     T_base_cam: Mapping[str, SE3],
     config: MapBuildConfig,
-    calibrate: bool,
 ) -> tuple[GraphSolution, State]:
     """Refine ``start`` with the corners (module docstring).
 
@@ -198,8 +205,8 @@ def refine_with_corners(
         Tags held by priors (anchors, or the origin tag).
     cameras, T_base_cam : mapping of str
     config : MapBuildConfig
-    calibrate : bool
-        Estimate the odometry calibration vector jointly (else it stays at ``start.c``).
+        ``joint_calibration``: estimate the odometry calibration vector jointly (else it stays
+        at ``start.c``).
 
     Returns
     -------
@@ -207,12 +214,15 @@ def refine_with_corners(
         ``mahalanobis`` is the corners' whitened norm per observation; ``linear`` the last
         linearization (for :func:`tagloc.mapping.graph.marginal_covariances`).
     """
-    problem = _Problem(obs, M_odom_raw, held, cameras, T_base_cam, config, calibrate)
+    problem = _Problem(obs, M_odom_raw, held, cameras, T_base_cam, config)
+    calibrate = problem.calibrate
     state, cost = start, problem.objective(start)
     cost_initial, rounds, solve_s = cost, 0, 0.0
+    linear: tuple[gtsam.GaussianFactorGraph, FloatArray] | None = None  # at ``state``
     while rounds < config.corner_max_iterations:
         rounds += 1
-        graph, _ = problem.linearize(state)
+        linear = problem.linearize(state)
+        graph = linear[0]
         t = time.perf_counter()
         delta = graph.optimize()
         solve_s += time.perf_counter() - t
@@ -226,10 +236,10 @@ def refine_with_corners(
         if new_cost > cost:
             break
         moved, turned = _moved(state, new)
-        state, cost = new, new_cost
+        state, cost, linear = new, new_cost, None
         if moved < STEP_TOL_M and turned < STEP_TOL_RAD:
             break
-    graph, r = problem.linearize(state)
+    graph, r = problem.linearize(state) if linear is None else linear
     solution = GraphSolution(
         M_map_base=state.M_map_base,
         M_map_tag=state.M_map_tag,
@@ -267,7 +277,7 @@ def refine_and_test_tilts(
     ambiguous: list[int] = []
     for pass_ in range(MAX_FLIP_PASSES + 1):
         solution, state = refine_with_corners(
-            obs, M_odom_raw, state, held, cameras, T_base_cam, config, config.joint_calibration
+            obs, M_odom_raw, state, held, cameras, T_base_cam, config
         )
         rounds += solution.iterations
         solve_s += solution.optimize_s

@@ -20,21 +20,23 @@ import numpy.typing as npt
 
 from tagloc.camera import CameraModel
 from tagloc.geometry import SE3
-from tagloc.mapping.corner_graph import kernel_weights, linearize_corners
+from tagloc.mapping.corner_graph import (
+    corner_squares,
+    kernel_cost,
+    kernel_weights,
+    linearize_corners,
+)
 from tagloc.mapping.observations import Observations
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 #: Width of the Cauchy kernel on a corner's whitened 2-D residual (sigmas).
 KERNEL_K = 3.0
-#: Whitened squared residual of a corner that does not project (behind the camera).
-_UNPROJECTED = 1e6
 
 
 def _nll(r: FloatArray) -> float:
-    s = np.sum(r**2, axis=-1)
-    s = np.where(np.isfinite(s), s, _UNPROJECTED)
-    return float(np.sum(0.5 * KERNEL_K**2 * np.log1p(s / KERNEL_K**2)))
+    """The module docstring's NLL of corner residuals ``r (n, 4, 2)`` (no cap)."""
+    return float(np.sum(kernel_cost(corner_squares(r), "cauchy", KERNEL_K)))
 
 
 def fit_tag_pose(
