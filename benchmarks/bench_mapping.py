@@ -39,7 +39,7 @@ DUPONT = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "dupon
 def bench_dupont() -> list[tuple[str, float, str]]:
     from tagloc.io import BagSource, load_kalibr_cameras
     from tagloc.mapping import build_tag_map
-    from tagloc.mapping.stream_survey import parse_camera_poses, parse_tagslam, survey_from_messages
+    from tagloc.mapping.stream_survey import parse_camera_poses, parse_tagslam, survey_from_tagslam
     from tagloc.mapping.survey import only_cameras
 
     bag = DUPONT / "tag_detections.bag.bz2"
@@ -50,15 +50,13 @@ def bench_dupont() -> list[tuple[str, float, str]]:
     items = list(BagSource(bag, corner_order="bl_br_tr_tl", default_family="tag36h11"))
     read_s = time.perf_counter() - start
     rig = parse_tagslam((DUPONT / "tagslam.yaml").read_text(), "tagslam.yaml")
-    survey = survey_from_messages(
+    survey = survey_from_tagslam(  # as `tagloc map build --tagslam`
         items,
         {"/fla/ovc_node/left/tags": "cam0", "/fla/ovc_node/right/tags": "cam1"},
         "/fla/vio/odom",
         load_kalibr_cameras(DUPONT / "cameras.yaml"),
         parse_camera_poses((DUPONT / "camera_poses.yaml").read_text(), "camera_poses.yaml"),
-        T_child_base=None if rig.T_body_odom is None else rig.T_body_odom.inverse(),
-        default_tag_size=rig.default_tag_size,
-        ignore_tags=rig.ignore_tags,
+        rig,
         source="dupont",
     )
     tag_map, report = build_tag_map(survey, rig.anchors)

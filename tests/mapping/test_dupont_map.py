@@ -23,7 +23,7 @@ from tagloc.mapping.stream_survey import (
     corner_rotation_by_gravity,
     parse_camera_poses,
     parse_tagslam,
-    survey_from_messages,
+    survey_from_tagslam,
 )
 from tagloc.mapping.survey import only_cameras
 from tagloc.tags.tagmap import TagMap
@@ -45,15 +45,13 @@ def rig_and_survey(tmp_path_factory: pytest.TempPathFactory) -> tuple[RigConfig,
         cache_dir=tmp_path_factory.mktemp("bag-cache"),
     )
     rig = parse_tagslam((DUPONT / "tagslam.yaml").read_text(), "tagslam.yaml")
-    survey = survey_from_messages(
+    survey = survey_from_tagslam(  # what `tagloc map build --tagslam` reads
         source,
         TOPICS,
         "/fla/vio/odom",
         load_kalibr_cameras(DUPONT / "cameras.yaml"),
         parse_camera_poses((DUPONT / "camera_poses.yaml").read_text(), "camera_poses.yaml"),
-        T_child_base=None if rig.T_body_odom is None else rig.T_body_odom.inverse(),
-        default_tag_size=rig.default_tag_size,
-        ignore_tags=rig.ignore_tags,
+        rig,
         source="dupont",
     )
     return rig, survey, time.perf_counter() - start

@@ -113,7 +113,7 @@ def _bag_survey(
     from tagloc.geometry import SE3
     from tagloc.io import BagSource, load_kalibr_cameras
     from tagloc.mapping import MappingError
-    from tagloc.mapping.stream_survey import parse_camera_poses, parse_tagslam, survey_from_messages
+    from tagloc.mapping.stream_survey import parse_camera_poses, parse_tagslam, survey_from_tagslam
 
     cameras = load_kalibr_cameras(cameras_yaml)
     topics = _tag_topics(cameras_yaml, tag_topics)
@@ -136,21 +136,15 @@ def _bag_survey(
     source = BagSource(
         bag, [*topics, odom_topic], corner_order=corner_order, default_family="tag36h11"
     )
-    survey = survey_from_messages(
+    survey = survey_from_tagslam(
         source,
         topics,
         odom_topic,
         cameras,
         T_base_cam,
-        T_child_base=None if rig is None or rig.T_body_odom is None else rig.T_body_odom.inverse(),
-        tag_sizes={
-            ("tag36h11", i): s for i, s in {**(rig.tag_sizes if rig else {}), **sizes}.items()
-        },
-        default_tag_size=tag_size
-        if tag_size is not None
-        else (rig.default_tag_size if rig else None),
-        ignore_tags=rig.ignore_tags if rig else (),
-        tag_remaps=rig.tag_remaps if rig else (),
+        rig,
+        tag_sizes=sizes,
+        default_tag_size=tag_size,
         source=str(bag),
     )
     return survey, dict(rig.anchors) if rig else {}

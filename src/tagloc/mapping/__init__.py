@@ -2,7 +2,7 @@
 
 - :class:`Survey` (odometry + camera frames of detections + cameras + extrinsics + tag sizes)
   from the simulator (:func:`survey_from_drive`) or a recorded stream
-  (:func:`survey_from_messages`).
+  (:func:`survey_from_messages`; :func:`survey_from_tagslam` with a tagSLAM rig's settings).
 - :func:`build_tag_map` -> ``(TagMap, BuildReport)``; :func:`build_map_from_drive` for a
   simulated drive, :func:`map_errors` against the simulated world.
 - :class:`MapBuildConfig`: the tunables.
@@ -20,6 +20,7 @@ from tagloc.mapping.stream_survey import (
     parse_camera_poses,
     parse_tagslam,
     survey_from_messages,
+    survey_from_tagslam,
 )
 from tagloc.mapping.survey import CameraFrame, MappingError, Survey, only_cameras
 
@@ -42,4 +43,5 @@ __all__ = [
     "parse_tagslam",
     "survey_from_drive",
     "survey_from_messages",
+    "survey_from_tagslam",
 ]

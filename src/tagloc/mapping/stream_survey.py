@@ -30,6 +30,7 @@ from tagloc.mapping.survey import CameraFrame, MappingError, Survey, TagKey
 from tagloc.messages import Message, OdometryMsg, TagDetectionsMsg
 from tagloc.tags.detection import TagDetection
 from tagloc.tags.pnp import estimate_tag_poses
+from tagloc.tags.tagmap import DEFAULT_FAMILY
 
 
 @dataclass(frozen=True, slots=True)
@@ -188,6 +189,43 @@ def survey_from_messages(
         tag_sizes=dict(tag_sizes or {}),
         default_tag_size=default_tag_size,
         ignore_tags=frozenset(int(i) for i in ignore_tags),
+        source=source,
+    )
+
+
+def survey_from_tagslam(
+    items: Iterable[tuple[str, Message]],
+    camera_topics: Mapping[str, str],
+    odom_topic: str,
+    cameras: Mapping[str, CameraModel],
+    T_base_cam: Mapping[str, SE3],
+    rig: RigConfig | None,
+    *,
+    tag_sizes: Mapping[int, float] | None = None,
+    default_tag_size: float | None = None,
+    family: str = DEFAULT_FAMILY,
+    source: str = "stream",
+) -> Survey:
+    """:func:`survey_from_messages` with a tagSLAM rig's settings (:func:`parse_tagslam`): the
+    base in the odometry's child frame (``T_body_odom`` inverted), tag sizes, ignored ids and
+    id remaps (``rig=None``: none of them).
+
+    ``tag_sizes`` (edge by id, tags of ``family``) and ``default_tag_size`` override the rig's.
+    """
+    sizes = {**(rig.tag_sizes if rig is not None else {}), **(tag_sizes or {})}
+    if default_tag_size is None and rig is not None:
+        default_tag_size = rig.default_tag_size
+    return survey_from_messages(
+        items,
+        camera_topics,
+        odom_topic,
+        cameras,
+        T_base_cam,
+        T_child_base=None if rig is None or rig.T_body_odom is None else rig.T_body_odom.inverse(),
+        tag_sizes={(family, i): s for i, s in sizes.items()},
+        default_tag_size=default_tag_size,
+        ignore_tags=rig.ignore_tags if rig is not None else (),
+        tag_remaps=rig.tag_remaps if rig is not None else (),
         source=source,
     )
 
