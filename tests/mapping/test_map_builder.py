@@ -4,7 +4,7 @@ Default tests map one loop of the office route (``repeat: 1``, every 3rd camera 
 ~3,200 observations of 37 tags) with the noise models that match the simulation
 (:func:`tagloc.mapping.sim_survey.sim_build_config`). Measured (drive seed 1, observation seed
 2): with the legged odometry and one anchor, tag position RMS 9.0 cm (8.5 cm after a rigid
-alignment), rotation RMS 0.84 deg, every error within 1.8 sigma of its marginal covariance;
+alignment), rotation RMS 0.84 deg, every error within 1.7 sigma of its marginal covariance;
 with 5 % false detections 8.6 cm, every one of them reported as an outlier; with perfect
 odometry 0.84 cm and 0.51 deg. Tags in this world are seen one room at a time, so tags far from
 the single anchor are only as good as the odometry between rooms (the legged random walk: 0.7
@@ -90,7 +90,7 @@ def test_tag_errors_are_within_the_reported_covariance(
     errors = map_errors(tag_map, drive.world)
     sigma = np.array([qa.position_sigma_m for qa in report.tags])
     free = sigma > 1e-3  # not the anchor
-    assert np.all(errors.position_error_m[free] <= 2.5 * sigma[free])  # measured max 1.8
+    assert np.all(errors.position_error_m[free] <= 2.5 * sigma[free])  # measured max 1.7
     assert errors.position_rms_m <= 0.11  # measured 0.090
     assert errors.aligned_position_rms_m <= 0.10  # shape error; measured 0.085
     assert errors.rotation_rms_deg <= 1.0  # measured 0.84
@@ -102,9 +102,10 @@ def test_every_tilt_is_resolved_or_flagged(drive: Drive, clean: tuple[TagMap, Bu
     tag_map, report = clean
     errors = map_errors(tag_map, drive.world)
     flagged = np.array([qa.tilt_ambiguous for qa in report.tags])
-    assert np.all(flagged[errors.rotation_error_deg > 5.0])  # QA names every wrong tilt
-    assert flagged.sum() <= 3
+    # no tilt is wrong, flagged or not (so none needs flagging) ...
     assert errors.rotation_error_deg.max() < 5.0  # measured 2.4 deg (tag 33)
+    # ... and QA does not cry wolf
+    assert flagged.sum() <= 3  # measured 1
 
 
 def test_optimization_removes_the_odometry_drift(
@@ -114,8 +115,8 @@ def test_optimization_removes_the_odometry_drift(
     before, after = _keyframe_rms(drive, report)
     assert before > 2.0  # the survey really drifted
     assert after < 0.05 * before
-    assert 0.35 <= report.reproj_rms_px <= 0.5  # corner noise 0.3 px per axis: 0.42 px
-    assert report.outliers <= 3 and report.disagreeing_tags == ()  # measured 0
+    assert 0.35 <= report.reproj_rms_px <= 0.5  # corner noise 0.3 px per axis: 0.37 px
+    assert report.outliers == 0 and report.disagreeing_tags == ()
 
 
 def test_glints_are_flagged_and_do_not_fold_the_map(
@@ -187,8 +188,8 @@ def test_full_survey_eight_anchors_reach_two_centimetres(full_drive: Drive) -> N
     )
     errors = map_errors(tag_map, full_drive.world)
     free = np.array([i not in anchors for i in errors.tag_ids])
-    assert float(np.sqrt(np.mean(errors.position_error_m[free] ** 2))) <= 0.02
-    assert float(np.sqrt(np.mean(errors.rotation_error_deg[free] ** 2))) <= 1.0
+    assert float(np.sqrt(np.mean(errors.position_error_m[free] ** 2))) <= 0.02  # measured 0.018
+    assert float(np.sqrt(np.mean(errors.rotation_error_deg[free] ** 2))) <= 1.0  # measured 0.47
 
 
 @pytest.mark.slow
