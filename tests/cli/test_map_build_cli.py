@@ -4,28 +4,16 @@ bad input gives one line naming the file or field, exit 1, and no map file."""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from cli_runner import run_tagloc
 from tagloc.sim import load_default_world
 from tagloc.tags.tagmap import load_tag_map
 
 DUPONT = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "dupont"
-
-
-def _tagloc(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-c", "from tagloc.cli import main; main()", *args],
-        capture_output=True,
-        text=True,
-        env={"MPLBACKEND": "Agg", "PATH": "", "COLUMNS": "120"},
-        check=False,
-        timeout=300,
-    )
 
 
 def _short_world(tmp_path: Path) -> Path:
@@ -38,7 +26,7 @@ def _short_world(tmp_path: Path) -> Path:
 
 def test_sim_build_writes_map_and_json_report(tmp_path: Path) -> None:
     out, report = tmp_path / "tags.yaml", tmp_path / "qa.json"
-    result = _tagloc(
+    result = run_tagloc(
         "map", "build", "--sim", "--world", str(_short_world(tmp_path)), "--camera-stride", "6",
         "--out", str(out), "--report", str(report),
     )  # fmt: skip
@@ -56,14 +44,14 @@ def test_sim_build_writes_map_and_json_report(tmp_path: Path) -> None:
 
 def test_markdown_report_and_map_check_round_trip(tmp_path: Path) -> None:
     out, report = tmp_path / "tags.yaml", tmp_path / "qa.md"
-    result = _tagloc(
+    result = run_tagloc(
         "map", "build", "--sim", "--world", str(_short_world(tmp_path)), "--camera-stride", "9",
         "--anchor", "3", "--out", str(out), "--report", str(report),
     )  # fmt: skip
     assert result.returncode == 0, result.stderr
     assert report.read_text().startswith("# Tag map build report")
     assert [e.id for e in load_tag_map(out).anchors] == [3]
-    check = _tagloc("map", "check", str(out))
+    check = run_tagloc("map", "check", str(out))
     assert check.returncode == 0 and "anchors: 1" in check.stdout
 
 
@@ -79,7 +67,7 @@ def test_bad_arguments_fail_in_one_line(
     tmp_path: Path, args: tuple[str, ...], message: str
 ) -> None:
     out = tmp_path / "tags.yaml"
-    result = _tagloc("map", "build", "--out", str(out), *args)
+    result = run_tagloc("map", "build", "--out", str(out), *args)
     assert result.returncode == 1
     assert result.stderr.count("\n") == 1 and message in result.stderr
     assert not out.exists()
@@ -101,7 +89,7 @@ def test_malformed_anchor_map_fails_before_reading_the_bag(
 ) -> None:
     bad, out = tmp_path / "anchors.yaml", tmp_path / "tags.yaml"
     bad.write_text(text)
-    result = _tagloc(
+    result = run_tagloc(
         "map", "build", "--bag", str(tmp_path / "missing.bag"), "--cameras",
         str(tmp_path / "cameras.yaml"), "--anchors", str(bad), "--out", str(out),
     )  # fmt: skip
@@ -112,7 +100,7 @@ def test_malformed_anchor_map_fails_before_reading_the_bag(
 
 def test_anchor_map_with_sim_is_refused(tmp_path: Path) -> None:
     out = tmp_path / "tags.yaml"
-    result = _tagloc("map", "build", "--sim", "--anchors", "x.yaml", "--out", str(out))
+    result = run_tagloc("map", "build", "--sim", "--anchors", "x.yaml", "--out", str(out))
     assert result.returncode == 1 and "--anchors is for --bag" in result.stderr
     assert result.stderr.count("\n") == 1 and not out.exists()
 
@@ -132,11 +120,11 @@ def test_bag_without_odometry_or_tag_size_fails_without_writing(tmp_path: Path) 
     args = _dupont_args(tmp_path)
     out = tmp_path / "tags.yaml"
     no_odom = [a if a != "/fla/vio/odom" else "/nope" for a in args]
-    result = _tagloc(*no_odom, "--tag-size", "0.15", "--out", str(out))
+    result = run_tagloc(*no_odom, "--tag-size", "0.15", "--out", str(out))
     assert result.returncode == 1 and "/nope" in result.stderr and not out.exists()
-    result = _tagloc(*args, "--anchor", "6", "--anchor", "3", "--out", str(out))
+    result = run_tagloc(*args, "--anchor", "6", "--anchor", "3", "--out", str(out))
     assert result.returncode == 1 and "--anchor 6: no pose known" in result.stderr
-    result = _tagloc(*args, "--out", str(out))
+    result = run_tagloc(*args, "--out", str(out))
     assert result.returncode == 1 and "has no known size" in result.stderr
     assert result.stderr.count("\n") == 1 and not out.exists()
 
@@ -144,7 +132,7 @@ def test_bag_without_odometry_or_tag_size_fails_without_writing(tmp_path: Path) 
 def test_dupont_bag_build(tmp_path: Path) -> None:
     out = tmp_path / "tags.yaml"
     args = [*_dupont_args(tmp_path), "--tagslam", str(DUPONT / "tagslam.yaml")]
-    result = _tagloc(*args, "--out", str(out))
+    result = run_tagloc(*args, "--out", str(out))
     assert result.returncode == 0, result.stderr
     tag_map = load_tag_map(out)
     assert len(tag_map) == 20 and tag_map.get(381) is None
