@@ -268,6 +268,41 @@ def test_process_noise_one_increment_equals_the_path_integral(planar: bool) -> N
     angle = np.linalg.norm((A0.rotation.inverse() @ A1.rotation).log())
     var = d_one * noise.var_per_m + angle * noise.var_per_rad + 0.05 * noise.var_per_s
     np.testing.assert_allclose(Q_one, Ad @ np.diag(var) @ Ad.T, rtol=1e-10)
+    # without the drift: the same walk and distance, no M
+    for full, bare in (
+        (path, noise.path(np.array([0, S // 20]), R, t, planar, drift=False)),
+        (one, noise.increment(S // 20, R[0], t[0], R[1], t[1], planar, drift=False)),
+    ):
+        assert np.array_equal(bare.Q, full.Q) and bare.distance_m == full.distance_m
+        assert bare.M.shape == (len(axes), 0)
+
+
+def test_a_frames_prior_and_its_fix_share_one_path_and_the_state_revision_counts() -> None:
+    buffer = TransformBuffer()
+    stamps = np.arange(0, 3 * S, S // 100)
+    poses = SE3.from_rotvec(np.zeros((len(stamps), 3)), np.outer(stamps / S, [1.0, 0, 0]))
+    buffer.set_transforms("odom", "base_link", stamps, poses)
+    flt = make_filter(buffer, calibration={"enabled": True})
+    flt.initialize(0, SE3.identity(), np.eye(6) * 1e-2)
+    revision = flt.revision
+    calls = []
+    integrate = flt._integrate
+    flt._integrate = lambda *args: calls.append(args[:2]) or integrate(*args)  # type: ignore[method-assign]
+    T = flt.T_map_base_at(S // 2)  # a frame's prior, then its fix: one integration
+    assert flt.revision == revision  # a prior does not change the state
+    event = flt.update(TagFix(S // 2, T, FIX_COV, "tag:1", FixQuality(reproj_err_px=0.4)))
+    assert event.kind is EventKind.ACCEPTED and calls == [(0, S // 2)]
+    assert flt.revision == revision + 2  # the prediction, then the update
+    flt.predict(S // 2 + S // 1000)  # less than a motion step: the state stays
+    assert flt.revision == revision + 2
+    flt.predict(S)
+    assert flt.revision == revision + 3 and flt.stamp_ns == S
+    flt.pose_at(2 * S)
+    flt.pose_at(2 * S)
+    # a changed buffer integrates again
+    buffer.set_transform("odom", "base_link", 3 * S, SE3.from_rotvec([0, 0, 0], [3.0, 0, 0]))
+    flt.pose_at(2 * S)
+    assert calls[1:] == [(S // 2, S), (S, 2 * S), (S, 2 * S)]
 
 
 def test_odometry_lookups_are_reused_only_while_the_buffer_is_unchanged() -> None:

@@ -23,7 +23,7 @@ Policies
 from tagloc.localize.config import LocalizerConfig, load_localizer_config, save_localizer_config
 from tagloc.localize.events import EventKind, EventLog, FilterEvent
 from tagloc.localize.fiducial import FiducialConfig, FiducialFixSource, FrameFixes
-from tagloc.localize.filter import MapOdomFilter, ProcessNoise
+from tagloc.localize.filter import MapOdomFilter
 from tagloc.localize.fix import (
     CorrectionUpdate,
     FixQuality,
@@ -39,6 +39,7 @@ from tagloc.localize.gating import (
     SourceMonitor,
     chi2_threshold,
 )
+from tagloc.localize.motion import ProcessNoise
 from tagloc.localize.pipeline import (
     FrameTruth,
     LocalizationPipeline,

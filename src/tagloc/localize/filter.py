@@ -1,34 +1,47 @@
 """``MapOdomFilter``: the ``map -> odom`` correction as an iterated error-state EKF on SE(3).
 
 State and frames
-    ``X = T_map_odom`` with covariance ``P`` in its right tangent, ``X_true = X @ Exp(dx)``,
-    ``dx ~ N(0, P)``, ordered ``[x, y, z, rx, ry, rz]``. Planar mode estimates ``(x, y, yaw)`` on
-    SE(2) (``P`` 3x3, ``[x, y, theta]``): z, roll and pitch of ``T_map_odom`` are pinned at 0 and
-    a fix enters as its planar projection (:meth:`TagFix.to_planar
-    <tagloc.localize.fix.TagFix.to_planar>`), so its z, roll and pitch are ignored. Odometry
-    ``A = T_odom_base(t)`` is read from a :class:`~tagloc.frames.TransformBuffer` into which the
-    caller inserts ``odom -> base`` samples.
-Prediction: a random walk driven by motion (:class:`ProcessNoise`)
-    Drift accrues in the base frame; an error ``n`` of the increment ending at ``A`` moves the
-    correction by ``X <- X @ Exp(Ad(A) n)``, so ``P <- P + sum_k Ad(A_k) Q_k Ad(A_k)^T``.
+    ``X = T_map_odom`` and, with odometry calibration (the default; :mod:`tagloc.localize.motion`),
+    its 4 parameters ``c = [scale, lateral, yaw_per_m, yaw_scale]``. The error state is
+    ``[dx, dc]`` with covariance ``P`` ((d + 4, d + 4); (d, d) without calibration):
+    ``X_true = X @ Exp(dx)``, ``c_true = c + dc``, ``dx`` in the right tangent of ``X``, ordered
+    ``[x, y, z, rx, ry, rz]`` (d = 6). Planar mode estimates ``(x, y, yaw)`` on SE(2) (d = 3,
+    ``[x, y, theta]``): z, roll and pitch of ``T_map_odom`` are pinned at 0 and a fix enters as
+    its planar projection (:meth:`TagFix.to_planar <tagloc.localize.fix.TagFix.to_planar>`), so
+    its z, roll and pitch are ignored. Odometry ``A = T_odom_base(t)`` is read from a
+    :class:`~tagloc.frames.TransformBuffer` into which the caller inserts ``odom -> base``
+    samples.
+Prediction: a random walk driven by motion plus the calibration drift (:class:`ProcessNoise`)
+    Over the odometry path between two stamps (increments ending at ``A_k``): a random error
+    ``n_k`` of an increment moves the correction by ``X <- X @ Exp(Ad(A_k) n_k)``, giving the
+    walk ``Q_x = sum_k Ad(A_k) Q_k Ad(A_k)^T``; the calibration moves it by ``M c``,
+    ``M = sum_k Ad(A_k) G_k``. So ``X <- X (+) M c``, ``c`` unchanged, and
+    ``P <- F P F^T + Q`` with ``F = [[I, M], [0, I]]`` and ``Q = diag(Q_x, Q_c)`` (``Q_c``: the
+    calibration's own walk per metre travelled). Without calibration ``P <- P + Q_x``.
 Update: iterated error-state EKF on the manifold (J. Sola, J. Deray, D. Atchuthan, "A micro Lie
 theory for state estimation in robotics", 2018, arXiv:1812.01537, the ESKF with right
 perturbations; iterated as Gauss-Newton, B. Bell and F. Cathey, IEEE TAC 1993)
     A fix ``z = T_map_base`` at ``t`` with covariance ``R``; ``A`` looked up at the same ``t`` (a
     late fix composes with the odometry of its own time); ``h(X) = X @ A``; innovation
     ``nu = z (-) h(X) = Log(h^-1 z)``. A right perturbation of ``X`` moves ``h`` by
-    ``Ad(A^-1)``: ``nu(X (+) dx) ~ nu - H dx`` with ``H = Jl^-1(nu) Ad(A^-1)``;
+    ``Ad(A^-1)``: ``nu(X (+) dx) ~ nu - H_x dx`` with ``H_x = Jl^-1(nu) Ad(A^-1)``; an on-time
+    fix does not see ``c`` (``H = [H_x, 0]``; a late one does, :meth:`MapOdomFilter._linearize`);
     ``S = H P H^T + R``; gate ``d2 = nu^T S^-1 nu <= chi2.ppf(q, dof)``. Iterate from
-    ``X_0 = X``: prior residual ``e = X_i (-) X_0``, ``m = -Jr(e) e``, ``P_i = Jr(e) P Jr(e)^T``,
-    ``K = P_i H^T S^-1``, ``dx = m + K (nu - H m)``, ``X_{i+1} = X_i (+) dx``, while the step
-    seen at the base, ``|H dx|``, exceeds ``relinearize_tol``. Then
-    ``P <- Jr(dx) [(I-KH) P_i (I-KH)^T + K R K^T] Jr(dx)^T`` (Joseph form, then the reset to the
-    tangent at the new ``X``).
+    ``X_0 = X``: prior residual ``e = [X_i (-) X_0, c_i - c_0]``, ``m = -J e``,
+    ``P_i = J P J^T`` (``J = diag(Jr(X_i (-) X_0), I)``), ``K = P_i H^T S^-1``,
+    ``dx = m + K (nu - H m)``, ``X_{i+1} = X_i (+) dx_x``, ``c_{i+1} = c_i + dx_c``, while the
+    step seen at the base, ``|H dx|``, exceeds ``relinearize_tol``. Then
+    ``P <- Jd [(I-KH) P_i (I-KH)^T + K R K^T] Jd^T`` with ``Jd = diag(Jr(dx_x), I)`` (Joseph
+    form, then the reset to the tangent at the new ``X``); ``c`` is clamped to ``max_abs``.
 Late fixes
-    A fix older than the state (by the walk ``Q`` between the two stamps): if the state was only
-    predicted since, the gain uses ``P - Q`` and ``Q`` is added back after the update, which for
-    a random walk is exactly updating on time and then predicting; if a newer fix was applied
-    meanwhile, ``Q`` is added to the fix's noise instead, ``R <- R + H Q H^T`` (conservative).
+    A fix older than the state is compared with the state moved back to its stamp,
+    ``X (+) M c`` (``M`` of the path back; ``F``, ``Q`` of the path between the two stamps):
+    if the state was only predicted since, the gain uses ``P - Q`` (the prior at the fix's
+    stamp carried forward by ``F``; ``H`` maps back through ``M``, :meth:`MapOdomFilter._linearize`)
+    and ``Q`` is added back after the update, which for
+    this linear model is exactly updating on time and then predicting; if a newer fix was
+    applied meanwhile, the pose walk is added to the fix's noise instead,
+    ``R <- R + H_x Q_x H_x^T`` (conservative).
 
 Policies (start-up, gaps, kidnap, moved tags, the cap) are in :meth:`MapOdomFilter.update`
 and :mod:`tagloc.localize.gating`.
@@ -92,14 +105,14 @@ class _Innovation:
     """A fix linearized at the state: ``nu (d,)``, ``H`` (d, n) over the whole state (pose and
     calibration), ``S^-1``, ``R`` (d, d), the prior covariance ``P_fix`` (n, n) the gain uses (the
     state's at the fix's stamp), ``M`` (d, 4): the calibration drift from the state's stamp to the
-    fix's (zeros without calibration), and ``d2``."""
+    fix's (None for a fix at the state's stamp or without calibration), and ``d2``."""
 
     nu: FloatArray
     H: FloatArray
     S_inv: FloatArray
     R: FloatArray
     P_fix: FloatArray
-    M: FloatArray
+    M: FloatArray | None
     d2: float
 
 
@@ -143,6 +156,13 @@ class MapOdomFilter:
     calibration : CalibrationModel, optional
         Estimate the odometry's calibration with the state (:mod:`tagloc.localize.motion`);
         None: the correction is a pure random walk.
+
+    Attributes
+    ----------
+    revision : int
+        Counts the changes of the state (``X``, calibration, ``P``, stamp: a prediction, an
+        applied fix, a (re)initialization): what is computed from the state stays valid while
+        it is unchanged (for callers that cache, e.g. :meth:`pose_at`).
     """
 
     def __init__(
@@ -200,6 +220,10 @@ class MapOdomFilter:
         self._A = SE3.identity()  # T_odom_base at the state's stamp
         self._odometer_m = 0.0
         self._looked_up: tuple[tuple[int, int], SE3] | None = None  # (stamp, revision), value
+        # the last _path: ((t_from, t_to, buffer revision, drift), A_from, A_to, result); a
+        # frame's prior (T_map_base_at) and its first fix's prediction ask for the same path
+        self._last_path: tuple[tuple[int, int, int, bool], SE3, SE3, PathMotion] | None = None
+        self.revision = 0  # bumped on every change of the state (X, c, P, stamp)
         self._gap = False
         self._ref_stamp, self._ref_odometer = 0, 0.0
 
@@ -322,9 +346,12 @@ class MapOdomFilter:
     def pose_at(self, stamp_ns: int, *, published: bool = False) -> PoseWithCovariance:
         """``T_map_base = T_map_odom @ T_odom_base(stamp_ns)`` with covariance.
 
-        ``cov = Ad(A^-1) (P + Q) Ad(A^-1)^T`` with ``Q`` the random walk between the state's
-        stamp and ``stamp_ns``. ``published=True`` composes the published (capped) correction
-        instead of the estimate (same covariance).
+        The state predicted to ``stamp_ns`` (either way in time) over the odometry path from
+        its stamp: ``T_map_base = (X (+) M c) @ A``, ``cov = Ad(A^-1) P' Ad(A^-1)^T`` with
+        ``P'`` the pose block of ``F P F^T + Q`` (``F = [[I, M], [0, I]]``, ``Q`` the random
+        walk between the two stamps; without calibration ``P + Q``). ``published=True``
+        composes the published (capped) correction, drifted the same way, instead of the
+        estimate (same covariance).
 
         Raises
         ------
@@ -482,6 +509,7 @@ class MapOdomFilter:
                     self._reinitialize(found, EventKind.REINITIALIZED_KIDNAP)
             return event
         self._X, self._c, self._P = self._iekf(cand, innov)
+        self.revision += 1
         self._updated_ns = max(self._updated_ns, fix.stamp_ns)
         self._sources.on_accepted(fix.source, d2)
         self._kidnap.clear()
@@ -566,6 +594,7 @@ class MapOdomFilter:
             if cand.stamp_ns > self._stamp:
                 self._advance(cand.stamp_ns, cand.odom)
             self._X, self._c, self._P = self._iekf(cand, self._innovation(cand, None))
+            self.revision += 1
         self._ref_stamp, self._ref_odometer = self._stamp, self._odometer_m
         for cand in found:
             self._sources.on_accepted(cand.fix.source, None)
@@ -593,6 +622,7 @@ class MapOdomFilter:
         full[self.dof :, self.dof :] = self._P[self.dof :, self.dof :]
         self._X, self._P, self._stamp, self._A = X, full, stamp_ns, odom
         self._updated_ns = stamp_ns
+        self.revision += 1
         self._gap = False
         self._ref_stamp, self._ref_odometer = stamp_ns, self._odometer_m
 
@@ -637,16 +667,27 @@ class MapOdomFilter:
         return Candidate(fix, odom, A, z, R)
 
     def _pair_noise(self, a: Candidate, b: Candidate) -> FloatArray:
-        return self._noise_between(a.stamp_ns, b.stamp_ns, a.odom, b.odom)[0]
+        """Random-walk covariance of the odometry path between two fixes."""
+        return self._path(a.stamp_ns, b.stamp_ns, a.odom, b.odom, drift=False).Q
 
-    def _noise_between(self, t0: int, t1: int, A0: SE3, A1: SE3) -> tuple[FloatArray, float]:
-        """Random-walk covariance and distance over the odometry path between two stamps."""
-        motion = self._path(t0, t1, A0, A1)
-        return motion.Q, motion.distance_m
-
-    def _path(self, t_from: int, t_to: int, A_from: SE3, A_to: SE3) -> PathMotion:
+    def _path(
+        self, t_from: int, t_to: int, A_from: SE3, A_to: SE3, *, drift: bool = True
+    ) -> PathMotion:
         """:class:`PathMotion` of the odometry path from ``t_from`` to ``t_to`` (either order:
-        the drift ``M`` is negated for a path back in time; ``Q`` is the walk between them)."""
+        the drift ``M`` is negated for a path back in time; ``Q`` is the walk between them).
+        ``M`` is computed only with calibration and ``drift`` (else ``(d, 0)``). The last
+        result is reused for the same stamps, end poses and buffer revision."""
+        drift = drift and self._nc > 0
+        key = (t_from, t_to, self._buffer.revision, drift)
+        last = self._last_path
+        if last is not None and last[0] == key and last[1] is A_from and last[2] is A_to:
+            return last[3]
+        motion = self._integrate(t_from, t_to, A_from, A_to, drift)
+        self._last_path = (key, A_from, A_to, motion)
+        return motion
+
+    def _integrate(self, t_from: int, t_to: int, A_from: SE3, A_to: SE3, drift: bool) -> PathMotion:
+        """:meth:`_path` without the reuse."""
         (lo, A_lo), (hi, A_hi) = sorted(((t_from, A_from), (t_to, A_to)), key=lambda p: p[0])
         R_lo, t_lo = A_lo.rotation.matrix, A_lo.translation
         R_hi, t_hi = A_hi.rotation.matrix, A_hi.translation
@@ -662,10 +703,10 @@ class MapOdomFilter:
                 stamps = np.concatenate([[lo], inner, [hi]])
                 R = np.concatenate([R_lo[None], mid.rotation.matrix, R_hi[None]])
                 t = np.concatenate([t_lo[None], mid.translation, t_hi[None]])
-                motion = self._noise.path(stamps, R, t, self.planar)
+                motion = self._noise.path(stamps, R, t, self.planar, drift)
         if motion is None:
-            motion = self._noise.increment(hi - lo, R_lo, t_lo, R_hi, t_hi, self.planar)
-        if t_to < t_from:
+            motion = self._noise.increment(hi - lo, R_lo, t_lo, R_hi, t_hi, self.planar, drift)
+        if t_to < t_from and drift:
             motion = PathMotion(motion.Q, motion.distance_m, -motion.M)
         return motion
 
@@ -714,17 +755,20 @@ class MapOdomFilter:
                 self._out.drift(self._drifted(self._out.current, motion))
         self._stamp, self._A = stamp_ns, odom
         self._odometer_m += motion.distance_m
+        self.revision += 1
 
     def _innovation(self, cand: Candidate, back: PathMotion | None) -> _Innovation:
-        """Linearize a fix at the state. A fix older than the state (``back``: the path from the
-        state's stamp to the fix's) is compared with the state moved back to its stamp,
-        ``X (+) M c`` (``M`` of ``back``; so ``H = [H_x, H_x M]`` over pose and calibration). If
-        the state was only predicted since, the gain uses the covariance at the fix's stamp,
-        ``P - Q_back`` (exact for this linear model: the same as updating on time, then
-        predicting); if a newer fix was applied meanwhile, the walk is added to the fix's noise
-        instead, ``R + H Q_back H^T`` (conservative)."""
+        """Linearize a fix at the (augmented) state. A fix at the state's stamp has
+        ``H = [H_x, 0]`` over pose and calibration. A fix older than the state (``back``: the
+        path from the state's stamp to the fix's) is compared with the state moved back to its
+        stamp, ``X (+) M c`` (``M`` of ``back``; ``H`` of :meth:`_linearize`, which sees ``c``).
+        If the state was only predicted since, the gain uses the prior at the fix's stamp
+        carried forward, ``P - Q_back`` (``Q_back``: pose and calibration walk of ``back``;
+        exact for this linear model: the same as updating on time, then predicting); if a
+        newer fix was applied meanwhile, the pose walk is added to the fix's noise instead,
+        ``R + H_x Q_x H_x^T`` (conservative)."""
         X, P = self._require(), self._P
-        M = back.M if back is not None else np.zeros((self.dof, self._nc))
+        M = back.M if back is not None and self._nc else None
         nu, H = self._linearize(cand, X, self._c, M)
         P_fix, R = P, cand.R
         if back is not None:
@@ -742,26 +786,25 @@ class MapOdomFilter:
         return _Innovation(nu, H, S_inv, R, P_fix, M, float(nu @ S_inv @ nu))
 
     def _linearize(
-        self, cand: Candidate, X: Pose, c: FloatArray, M: FloatArray
+        self, cand: Candidate, X: Pose, c: FloatArray, M: FloatArray | None
     ) -> tuple[FloatArray, FloatArray]:
         """Innovation ``nu = z (-) (X (+) u) @ A``, ``u = M c``, and its Jacobian ``H`` (d, n):
         ``nu(X (+) dx, c + dc) ~ nu - H [dx, dc]``, with ``H = [H_f Ad(Exp(-u)), H_f Jr(u) M]``
         and ``H_f = Jl^-1(nu) Ad(A^-1)`` (``Jl^-1(nu) = Jr^-1(-nu)``), the Jacobian at the
-        state moved to the fix's stamp."""
-        u = M @ c if self._nc else None
-        if u is None or not u.any():  # the fix is at the state's stamp (or no calibration)
-            nu = cand.z.minus(X @ cand.A)  # type: ignore[operator, arg-type]
-            H_f = _jr_inv(-nu) @ cand.Ad_A_inv
-            if not self._nc:
-                return nu, H_f
+        state moved to the fix's stamp. ``M = None``: a fix at the state's stamp (``u = 0``,
+        ``H = [H_f, 0]``); ignored without calibration (``H = H_f``)."""
+        X_fix = X  # the state moved to the fix's stamp
+        if M is not None and self._nc:
+            E, Jr_u = type(X).exp(M @ c, jacobians=True)
+            X_fix = X @ E  # type: ignore[operator]
+        nu = cand.z.minus(X_fix @ cand.A)  # type: ignore[operator, arg-type]
+        H_f = _jr_inv(-nu) @ cand.Ad_A_inv
+        if not self._nc:
+            return nu, H_f
+        if M is None:
             H = np.zeros((self.dof, self._n))
             H[:, : self.dof] = H_f
-            if M.any():  # c = 0 (before any calibration) on a late fix
-                H[:, self.dof :] = H_f @ M
             return nu, H
-        E, Jr_u = type(X).exp(u, jacobians=True)
-        nu = cand.z.minus(X @ E @ cand.A)  # type: ignore[operator, arg-type]
-        H_f = _jr_inv(-nu) @ cand.Ad_A_inv
         return nu, np.hstack([H_f @ E.inverse().adjoint(), H_f @ Jr_u @ M])
 
     def _iekf(

@@ -82,6 +82,14 @@ def calibration_jacobians(
     return G
 
 
+_NO_DRIFT = {False: np.zeros((6, 0)), True: np.zeros((3, 0))}  # empty: safe to share
+
+
+def _no_drift(planar: bool) -> FloatArray:
+    """The ``(d, 0)`` ``M`` of a :class:`PathMotion` computed without the drift."""
+    return _NO_DRIFT[planar]
+
+
 @dataclass(frozen=True, slots=True)
 class PathMotion:
     """What the odometry path between two stamps does to the correction.
@@ -92,7 +100,8 @@ class PathMotion:
         Random-walk covariance (right tangent at the later stamp).
     distance_m : float
     M : (d, 4) float
-        Drift per unit calibration: ``X_later = X_earlier (+) M c`` (module docstring).
+        Drift per unit calibration: ``X_later = X_earlier (+) M c`` (module docstring);
+        ``(d, 0)`` when not computed (``drift=False``: no calibration, or only ``Q`` needed).
     """
 
     Q: FloatArray
@@ -119,10 +128,12 @@ class ProcessNoise:
     step_ns: int
 
     def path(
-        self, stamps_ns: npt.NDArray[np.int64], R: FloatArray, t: FloatArray, planar: bool
-    ) -> PathMotion:
+        self, stamps_ns: npt.NDArray[np.int64], R: FloatArray, t: FloatArray, planar: bool,
+        drift: bool = True,
+    ) -> PathMotion:  # fmt: skip
         """The increments between odometry samples ``A_k = (R[k], t[k])`` at ``stamps_ns (N,)``
-        (``R (N, 3, 3)``, ``t (N, 3)``), oldest first."""
+        (``R (N, 3, 3)``, ``t (N, 3)``), oldest first. ``drift=False`` skips the calibration
+        drift ``M`` (left ``(d, 0)``)."""
         R0T = np.swapaxes(R[:-1], 1, 2)
         dR = R0T @ R[1:]
         dt_map = np.diff(t, axis=0)
@@ -136,6 +147,8 @@ class ProcessNoise:
         )
         Ad = adjoints(R[1:], t[1:], planar)
         Q = np.einsum("kij,kj,klj->il", Ad, var, Ad)
+        if not drift:
+            return PathMotion(Q, float(dist.sum()), _no_drift(planar))
         d_base = np.einsum("kij,kj->ki", R0T, dt_map)
         G = calibration_jacobians(d_base, dist, np.arctan2(dR[:, 1, 0], dR[:, 0, 0]), planar)
         M = np.einsum("kij,kjl->il", Ad, G)
@@ -143,30 +156,39 @@ class ProcessNoise:
 
     def increment(
         self, dt_ns: int, R0: FloatArray, t0: FloatArray, R1: FloatArray, t1: FloatArray,
-        planar: bool,
+        planar: bool, drift: bool = True,
     ) -> PathMotion:  # fmt: skip
-        """:meth:`path` for one increment ``(R0, t0) -> (R1, t1)`` (the per-fix path)."""
+        """:meth:`path` for one increment ``(R0, t0) -> (R1, t1)`` (the per-fix path).
+
+        ``G`` is :func:`calibration_jacobians` for this one increment, written out on floats
+        (0.5 us against 2-3 us for the batched function on one row; the tests compare the
+        two through :meth:`path`)."""
         d = t1 - t0
         dist = math.sqrt(float(d @ d))
         cos = 0.5 * (float(np.vdot(R0, R1)) - 1.0)  # trace(R0^T R1) = sum(R0 * R1)
         angle = math.acos(min(1.0, max(-1.0, cos)))
         var = dist * self.var_per_m + angle * self.var_per_rad + (dt_ns / S_NS) * self.var_per_s
-        bx, by, bz = (R0.T @ d).tolist()  # the increment in the base frame at its start
-        dyaw = math.atan2(float(R0[:, 1] @ R1[:, 0]), float(R0[:, 0] @ R1[:, 0]))
         if planar:
             c, s = R1[0, 0], R1[1, 0]
             n = math.hypot(c, s)
             Ad = np.array([[c / n, -s / n, t1[1]], [s / n, c / n, -t1[0]], [0.0, 0.0, 1.0]])
-            G = np.array([[bx, 0.0, 0.0, 0.0], [by, dist, 0.0, 0.0], [0.0, 0.0, dist, dyaw]])
         else:
             x, y, z = t1.tolist()
             Ad = np.zeros((6, 6))
             Ad[:3, :3] = Ad[3:, 3:] = R1
             Ad[:3, 3:] = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]]) @ R1
+        Q = (Ad * var) @ Ad.T
+        if not drift:
+            return PathMotion(Q, dist, _no_drift(planar))
+        bx, by, bz = (R0.T @ d).tolist()  # the increment in the base frame at its start
+        dyaw = math.atan2(float(R0[:, 1] @ R1[:, 0]), float(R0[:, 0] @ R1[:, 0]))
+        if planar:
+            G = np.array([[bx, 0.0, 0.0, 0.0], [by, dist, 0.0, 0.0], [0.0, 0.0, dist, dyaw]])
+        else:
             G = np.zeros((6, N_CALIBRATION))
             G[0, 0], G[1, 0], G[2, 0], G[1, 1] = bx, by, bz, dist
             G[5, 2], G[5, 3] = dist, dyaw
-        return PathMotion((Ad * var) @ Ad.T, dist, Ad @ G)
+        return PathMotion(Q, dist, Ad @ G)
 
 
 @dataclass(frozen=True, slots=True)

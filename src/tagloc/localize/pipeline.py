@@ -41,6 +41,7 @@ from tagloc.localize.config import LocalizerConfig
 from tagloc.localize.fiducial import FiducialConfig, FiducialFixSource, FrameFixes
 from tagloc.localize.filter import MapOdomFilter
 from tagloc.localize.fix import LocalizeError
+from tagloc.localize.motion import CALIBRATION_PARAMETERS
 from tagloc.localize.run import CameraFrameRecord, FixAttempt, LocalizationRun
 from tagloc.messages import (
     CameraInfoMsg,
@@ -153,7 +154,7 @@ class LocalizationPipeline:
         self._odom: list[SE3] = []
         self._published: list[SE3] = []
         self._covs: list[np.ndarray] = []
-        self._cov_last, self._cov_events, self._cov_stamp = _NAN6, -1, 0
+        self._cov_last, self._cov_revision, self._cov_stamp = _NAN6, -1, 0
         self._cov_step_ns = round(self.config.process_noise.motion_step_s * S_NS)
         self._init: list[bool] = []
         self._truth: dict[int, SE3] = {}
@@ -220,18 +221,17 @@ class LocalizationPipeline:
         return None
 
     def _record(self, stamp: int, T_odom_base: SE3) -> None:
-        """One row of the run. The covariance of ``T_map_base`` is recomputed when the filter
-        decided something or a motion step (0.1 s) passed, else the row repeats the last one
-        (it grows by the odometry random walk of < 0.1 s meanwhile)."""
+        """One row of the run. The covariance of ``T_map_base`` is recomputed when the filter's
+        state changed (:attr:`MapOdomFilter.revision`) or a motion step (0.1 s) passed, else the
+        row repeats the last one (it grows by the odometry random walk of < 0.1 s meanwhile)."""
         flt = self.filter
         self._stamps.append(stamp)
         self._odom.append(T_odom_base)
         if flt.initialized:
             self._published.append(flt.correction_at(stamp))
-            n_events = len(flt.events)
-            if n_events != self._cov_events or stamp - self._cov_stamp >= self._cov_step_ns:
+            if flt.revision != self._cov_revision or stamp - self._cov_stamp >= self._cov_step_ns:
                 self._cov_last = flt.pose_at(stamp).cov
-                self._cov_events, self._cov_stamp = n_events, stamp
+                self._cov_revision, self._cov_stamp = flt.revision, stamp
             self._covs.append(self._cov_last)
         else:
             self._published.append(SE3.identity())
@@ -385,8 +385,6 @@ class LocalizationPipeline:
         counts = {str(k): v for k, v in self.filter.events.counts_by_kind().items()}
         calibration = self.filter.odometry_calibration
         if calibration is not None:
-            from tagloc.localize.motion import CALIBRATION_PARAMETERS
-
             value, sigma = calibration
             calib: dict[str, Any] | None = {
                 name: {"value": float(v), "sigma": float(s)}
