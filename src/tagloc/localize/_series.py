@@ -20,10 +20,7 @@ _SERIES_BELOW = 0.3  # sum |tau_i| under which Jr, Jr^-1 use their series (error
 
 
 def _ad(tau: FloatArray) -> FloatArray:
-    """Small adjoint ``ad(tau)`` of se(3) ``[rho, phi]`` or se(2) ``[x, y, theta]``."""
-    if len(tau) == 3:
-        x, y, th = tau.tolist()
-        return np.array([[0.0, -th, y], [th, 0.0, -x], [0.0, 0.0, 0.0]])
+    """Small adjoint ``ad(tau)`` of se(3) ``[rho, phi]`` (se(2): :func:`_se2_series`)."""
     a, b, c, d, e, f = tau.tolist()  # [[phi^, rho^], [0, phi^]]
     return np.array([
         [0.0, -f, e, 0.0, -c, b], [f, 0.0, -d, c, 0.0, -a], [-e, d, 0.0, -b, a, 0.0],
