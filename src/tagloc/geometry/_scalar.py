@@ -18,7 +18,8 @@ from tagloc.geometry._so3math import COT_SERIES, SERIES_ANGLE, SIN3_SERIES
 Vec3 = tuple[float, float, float]
 
 
-def _series(t2: float, coefficients: tuple[float, ...]) -> float:
+def even_series(t2: float, coefficients: tuple[float, ...]) -> float:
+    """:func:`tagloc.geometry._so3math.even_series` (Horner's rule) on one float."""
     out = coefficients[-1]
     for c in coefficients[-2::-1]:
         out = out * t2 + c
@@ -32,14 +33,14 @@ def exp_coefficients(t2: float) -> tuple[float, float, float]:
     t = math.sqrt(t2)
     s = math.sin(t)
     h = math.sin(0.5 * t) / t
-    c3 = _series(t2, SIN3_SERIES) if t < SERIES_ANGLE else (t - s) / (t2 * t)
+    c3 = even_series(t2, SIN3_SERIES) if t < SERIES_ANGLE else (t - s) / (t2 * t)
     return s / t, 2.0 * h * h, c3
 
 
 def coeff_cot(t2: float) -> float:
     """``(1 - (t/2) cot(t/2)) / t^2`` from ``t2 = t^2``."""
     if t2 < SERIES_ANGLE * SERIES_ANGLE:
-        return _series(t2, COT_SERIES)
+        return even_series(t2, COT_SERIES)
     half = 0.5 * math.sqrt(t2)
     return (1.0 - half * math.cos(half) / math.sin(half)) / t2
 

@@ -19,6 +19,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tagloc.geometry import _quatmath as quatm
+from tagloc.geometry import _scalar
 from tagloc.geometry import _so3math as so3m
 from tagloc.geometry._checks import FloatArray
 from tagloc.geometry.se3 import SE3, _matvec
@@ -72,13 +73,7 @@ def _series(t2: FloatArray, coefficients: tuple[float, ...]) -> FloatArray:
     """:func:`so3m.even_series` (Horner's rule), on plain floats for small batches."""
     if t2.size > _SCALAR_SERIES_MAX:
         return so3m.even_series(t2, coefficients)
-    reverse = coefficients[-2::-1]
-    values = []
-    for x in t2.ravel().tolist():
-        out = coefficients[-1]
-        for c in reverse:
-            out = out * x + c
-        values.append(out)
+    values = [_scalar.even_series(x, coefficients) for x in t2.ravel().tolist()]
     return np.array(values, dtype=np.float64).reshape(t2.shape)
 
 
