@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 import pytest
-from test_localize_sim import FIX_COV, MS, Drive, S, make_filter, make_fix, square_path
+from test_localize_sim import MS, Drive, S, make_filter, make_fix, square_path
 
 from tagloc.frames import TransformBuffer
 from tagloc.geometry import SE3, SO3
@@ -109,9 +109,10 @@ def test_a_late_fix_with_calibration_matches_the_on_time_one() -> None:
         late.predict(fix.stamp_ns + 300 * MS)  # the state is already 300 ms ahead
         late.update(fix)
     on_time.predict(late.stamp_ns)
-    # exact for the linear model; the composition on SE(2) differs at second order (< 1 mm)
-    assert late.T_map_odom.allclose(on_time.T_map_odom, atol=1e-3)
-    np.testing.assert_allclose(late.covariance, on_time.covariance, rtol=0.02, atol=1e-8)
+    # exact for the linear model; the composition on SE(2) differs at second order: measured
+    # 4.2e-5 m and 0.26 % here (at most 1.1e-4 m and 0.36 % over seeds 1-7)
+    assert late.T_map_odom.allclose(on_time.T_map_odom, atol=2e-4)
+    np.testing.assert_allclose(late.covariance, on_time.covariance, rtol=0.005, atol=1e-8)
 
 
 def test_calibration_config_is_validated_and_bounded() -> None:
@@ -133,4 +134,3 @@ def test_calibration_config_is_validated_and_bounded() -> None:
     assert result is not None
     assert abs(result[0][0]) <= 0.01 + 1e-12  # the true 3.8 % would need more
     assert flt.events.count(EventKind.ACCEPTED) > 100
-    assert FIX_COV.shape == (6, 6)
