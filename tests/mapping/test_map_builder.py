@@ -98,7 +98,9 @@ def test_tag_errors_are_within_the_reported_covariance(
     assert np.sqrt(np.mean((errors.position_error_m[free] / sigma[free]) ** 2)) > 0.4
 
 
-def test_no_tilt_is_wrong_and_few_are_flagged(drive: Drive, clean: tuple[TagMap, BuildReport]) -> None:
+def test_no_tilt_is_wrong_and_few_are_flagged(
+    drive: Drive, clean: tuple[TagMap, BuildReport]
+) -> None:
     tag_map, report = clean
     errors = map_errors(tag_map, drive.world)
     flagged = np.array([qa.tilt_ambiguous for qa in report.tags])
