@@ -227,6 +227,10 @@ def test_cap_clips_translation_and_rotation_separately(kind: type) -> None:
     assert np.linalg.norm(step.log()[2 if kind is SE2 else 3 :]) == pytest.approx(math.radians(5))
     small = kind.identity()
     assert cap.clip(small) == (small, False)
+    # exceeds() is clip()'s verdict without building the clipped pose
+    assert cap.exceeds(jump) and not cap.exceeds(small)
+    just_over = SE3.from_rotvec([0, 0, 0], [0.26, 0, 0]) if kind is SE3 else SE2(0.26, 0, 0)
+    assert cap.exceeds(just_over) == cap.clip(just_over)[1] is True
 
 
 def test_event_log_counts_by_kind_and_source() -> None:

@@ -137,7 +137,8 @@ class SuspectConfig(StrictModel):
     #: Consecutive gated fixes count as "wrong the same way" only if the corrections they imply
     #: agree within this (m, and deg below): a moved tag repeats its pose to centimetres, while
     #: glints decoded under its id are vague (metres of covariance) and pass a chi-square pair
-    #: test for that reason alone.
+    #: test for that reason alone. Two gated fixes are compared only if they are at most
+    #: ``kidnap.window_s`` apart (the same window the kidnap test uses).
     max_spread_m: float = Field(0.3, gt=0)
     max_spread_deg: float = Field(5.0, gt=0)
 

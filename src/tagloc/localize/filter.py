@@ -270,8 +270,8 @@ class MapOdomFilter:
             kidnap_one_source_min_jump_m=k.one_source_min_jump_m,
             suspect_min_gated=config.suspect.min_gated,
             suspect_clear_after=config.suspect.clear_after,
-            suspect_spread=CorrectionCap(
-                config.suspect.max_spread_m, math.radians(config.suspect.max_spread_deg), True
+            suspect_spread=CorrectionCap(  # a bound on the spread, not a published cap
+                config.suspect.max_spread_m, math.radians(config.suspect.max_spread_deg)
             ),
             max_iterations=config.filter.max_iterations,
             relinearize_tol=config.filter.relinearize_tol,
@@ -484,9 +484,9 @@ class MapOdomFilter:
             consistent = (
                 last is not None
                 and cand.stamp_ns - last.stamp_ns <= self._suspect_window_ns
-                and not self._suspect_spread.clip(  # the two seen at the robot's pose
+                and not self._suspect_spread.exceeds(  # the two seen at the robot's pose
                     (last.T_map_odom @ cand.A).inverse() @ cand.z  # type: ignore[operator]
-                )[1]
+                )
                 and pair_d2(last, cand, self._pair_noise(last, cand)) <= self.threshold
             )
             if self._sources.on_gated(fix.source, d2, consistent):

@@ -317,11 +317,11 @@ class CorrectionCap:
 
     max_translation_m: float
     max_rotation_rad: float
-    snap_on_initialize: bool
+    snap_on_initialize: bool = False
 
-    def clip(self, D: Pose) -> tuple[Pose, bool]:
-        """Scale the translation and the rotation angle of the jump ``D`` (base frame) down to
-        the caps, independently; return it and whether it was clipped."""
+    def _scales(self, D: Pose) -> tuple[float, float]:
+        """Factors (<= 1) that bring the translation and the rotation angle of ``D`` to the
+        caps."""
         t = D.translation
         if isinstance(D, SE2):
             angle = abs(float(D.rotation_angle))
@@ -331,8 +331,19 @@ class CorrectionCap:
         norm_t = math.sqrt(float(t @ t))
         a_t = min(1.0, self.max_translation_m / norm_t) if norm_t > 0 else 1.0
         a_r = min(1.0, self.max_rotation_rad / angle) if angle > 0 else 1.0
+        return a_t, a_r
+
+    def exceeds(self, D: Pose) -> bool:
+        """Whether the jump ``D`` (base frame) is beyond either cap."""
+        return self._scales(D) != (1.0, 1.0)
+
+    def clip(self, D: Pose) -> tuple[Pose, bool]:
+        """Scale the translation and the rotation angle of the jump ``D`` (base frame) down to
+        the caps, independently; return it and whether it was clipped."""
+        a_t, a_r = self._scales(D)
         if a_t == 1.0 and a_r == 1.0:
             return D, False
+        t = D.translation
         if isinstance(D, SE2):
             return SE2(a_t * t[0], a_t * t[1], a_r * float(D.rotation_angle)), True
         rotvec = D.rotation.as_rotvec()
