@@ -2,7 +2,7 @@
 
 Default tests map one loop of the office route (``repeat: 1``, every 3rd camera frame, ~190 m,
 ~3,200 observations of 37 tags) with the noise models that match the simulation
-(:func:`tagloc.mapping.sim_survey.sim_build_config`). Measured (drive seed 1, observation seed
+(:func:`tagloc.sim.survey.sim_build_config`). Measured (drive seed 1, observation seed
 2): with the legged odometry and one anchor, tag position RMS 9.0 cm (8.5 cm after a rigid
 alignment), rotation RMS 0.84 deg, every error within 1.7 sigma of its marginal covariance;
 with 5 % false detections 8.6 cm, every one of them reported as an outlier; with perfect
@@ -17,8 +17,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tagloc.mapping import BuildReport, build_map_from_drive, map_errors
+from tagloc.mapping import BuildReport
 from tagloc.sim import Drive, ObservationConfig, World, load_default_world, simulate_drive
+from tagloc.sim.survey import build_map_from_drive, map_errors
 from tagloc.tags.tagmap import TagMap
 
 PERFECT_ODOMETRY = {

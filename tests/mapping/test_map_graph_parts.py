@@ -26,9 +26,9 @@ from tagloc.mapping.gtsam_bridge import cov_from_gtsam, cov_to_gtsam, from_pose3
 from tagloc.mapping.initialize import consensus_rotation, inverse_h
 from tagloc.mapping.observations import collect_observations, interpolate_odometry
 from tagloc.mapping.odometry_factors import linearize_odometry, log_batch, odometry_residuals
-from tagloc.mapping.sim_survey import odometry_noise_of, survey_from_drive
 from tagloc.sim import ObservationConfig, World, load_default_world, simulate_drive
 from tagloc.sim.odometry import simulate_odometry
+from tagloc.sim.survey import odometry_noise_of, survey_from_drive
 from tagloc.sim.trajectory import se3_from_xy_yaw
 from tagloc.tags import TagDetection
 from tagloc.tags.covariance import NoiseModel

@@ -32,8 +32,9 @@ if TYPE_CHECKING:
     from tagloc.eval import EvalSummary
     from tagloc.eval.drive_report import DriveSummary
     from tagloc.localize.run import LocalizationRun
-    from tagloc.mapping import BuildReport, MapErrors
+    from tagloc.mapping import BuildReport
     from tagloc.sim import World
+    from tagloc.sim.survey import MapErrors
     from tagloc.tags.tagmap import TagMap
 
 #: Survey drives use every n-th camera frame (30 Hz frames overlap; 10 Hz keeps the build short).
@@ -71,8 +72,8 @@ def survey_and_build(
     ids held at their true poses; default the first tag seen), write ``out/tags.yaml`` and
     ``out/map_report.md``, and score the map against ``world``."""
     from tagloc.fileutil import atomic_write_text
-    from tagloc.mapping import build_map_from_drive, map_errors
     from tagloc.sim import ObservationConfig, simulate_drive
+    from tagloc.sim.survey import build_map_from_drive, map_errors
     from tagloc.tags.tagmap import save_tag_map
 
     start = time.perf_counter()

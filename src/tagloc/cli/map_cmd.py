@@ -191,8 +191,8 @@ def map_build(
     from rich.progress import Progress
 
     from tagloc.fileutil import atomic_write_text
-    from tagloc.mapping import MapBuildConfig, MappingError, build_map_from_drive, build_tag_map
-    from tagloc.mapping.sim_survey import sim_build_config
+    from tagloc.mapping import MapBuildConfig, MappingError, build_tag_map
+    from tagloc.sim.survey import build_map_from_drive, sim_build_config
     from tagloc.tags.tagmap import load_tag_map, save_tag_map
 
     if sim == (bag is not None):

@@ -1,10 +1,10 @@
 """Offline tag-map building: a factor graph in GTSAM from a survey drive, with a QA report.
 
 - :class:`Survey` (odometry + camera frames of detections + cameras + extrinsics + tag sizes)
-  from the simulator (:func:`survey_from_drive`) or a recorded stream
+  from the simulator (:func:`tagloc.sim.survey.survey_from_drive`) or a recorded stream
   (:func:`survey_from_messages`; :func:`survey_from_tagslam` with a tagSLAM rig's settings).
-- :func:`build_tag_map` -> ``(TagMap, BuildReport)``; :func:`build_map_from_drive` for a
-  simulated drive, :func:`map_errors` against the simulated world.
+- :func:`build_tag_map` -> ``(TagMap, BuildReport)``; :mod:`tagloc.sim.survey` builds one
+  from a simulated drive and measures it against the simulated world.
 - :class:`MapBuildConfig`: the tunables.
 
 Errors are :class:`MappingError`.
@@ -13,7 +13,6 @@ Errors are :class:`MappingError`.
 from tagloc.mapping.builder import build_tag_map
 from tagloc.mapping.config import MapBuildConfig, OdometryNoise
 from tagloc.mapping.report import BuildReport, TagQA
-from tagloc.mapping.sim_survey import MapErrors, build_map_from_drive, map_errors, survey_from_drive
 from tagloc.mapping.stream_survey import (
     RigConfig,
     corner_rotation_by_gravity,
@@ -28,20 +27,16 @@ __all__ = [
     "BuildReport",
     "CameraFrame",
     "MapBuildConfig",
-    "MapErrors",
     "MappingError",
     "OdometryNoise",
     "RigConfig",
     "Survey",
     "TagQA",
-    "build_map_from_drive",
     "build_tag_map",
     "corner_rotation_by_gravity",
-    "map_errors",
     "only_cameras",
     "parse_camera_poses",
     "parse_tagslam",
-    "survey_from_drive",
     "survey_from_messages",
     "survey_from_tagslam",
 ]

@@ -21,7 +21,7 @@ class OdometryNoise(BaseModel):
     0.02 rad/sqrt(m) in yaw) are loose: they also cover a few percent of uncalibrated drift, and
     they are what the dupont VIO map uses. Where the odometry's random walk is known, give it
     and calibrate the systematic part (``MapBuildConfig.joint_calibration``): the simulator's
-    builder does (:func:`tagloc.mapping.sim_survey.odometry_noise_of`), and on 12 simulated
+    builder does (:func:`tagloc.sim.survey.odometry_noise_of`), and on 12 simulated
     legged drives that beat these defaults, 7.6 cm tag RMS against 9.8 cm.
     """
 

@@ -1,7 +1,7 @@
 """The input of the map builder: a survey drive (odometry + tag detections per camera frame).
 
 A :class:`Survey` is plain data, independent of where it came from (the simulator,
-:mod:`tagloc.mapping.sim_survey`; a recorded bag, :mod:`tagloc.mapping.stream_survey`):
+:mod:`tagloc.sim.survey`; a recorded bag, :mod:`tagloc.mapping.stream_survey`):
 
 - odometry ``T_odom_base`` at ``odom_stamps_ns`` (strictly increasing), interpolated to every
   camera frame's stamp by the builder (odometry and camera are never sampled at the same instants);
