@@ -1,4 +1,10 @@
-"""``localizer.yaml``: the tunables of the ``map -> odom`` filter, with documented defaults.
+"""``localizer.yaml``: the one configuration of the localizer node, with documented defaults.
+
+Sections: ``frames`` (names, the published edge), ``tags`` (detector, PnP mode, pixel noise, how
+fixes are formed), ``gates`` (one set for observations and fixes), ``process_noise``,
+``calibration``, ``cap`` (per-update cap and speed limit), ``kidnap``, ``suspect``, ``filter``,
+``supervisor`` (health, ladder, status rate) and ``output`` (publication rate). The resolved
+configuration (every default written out) is saved with every run.
 
 Loaded like every tagloc file (:mod:`tagloc.config`): unknown keys, NaN and wrong types are one
 :class:`~tagloc.errors.ConfigError` line naming the file and the field path, e.g.
@@ -21,18 +27,12 @@ from pydantic import Field
 from tagloc.config import StrictModel, parse_yaml_mapping, validate
 from tagloc.errors import ConfigError
 from tagloc.fileutil import atomic_write_text
+from tagloc.localize.config_tags import FramesConfig, GatesConfig, TagSensorConfig
+from tagloc.supervise import SupervisorConfig
 
 _Sigma = Annotated[float, Field(ge=0)]
 #: Standard deviations per axis ``[x, y, z, rx, ry, rz]``, each ``>= 0``.
 SigmaVec6 = tuple[_Sigma, _Sigma, _Sigma, _Sigma, _Sigma, _Sigma]
-
-
-class FramesConfig(StrictModel):
-    """Frame names (configuration, never literals in the algorithm)."""
-
-    map_frame: str = Field("map", min_length=1)
-    odom_frame: str = Field("odom", min_length=1)
-    base_frame: str = Field("base_link", min_length=1)
 
 
 class ProcessNoiseConfig(StrictModel):
@@ -73,30 +73,6 @@ class CalibrationConfig(StrictModel):
     max_abs: tuple[_Sigma, _Sigma, _Sigma, _Sigma] = (0.2, 0.1, 2.0, 0.2)
 
 
-class GatesConfig(StrictModel):
-    """Per-fix gates and the k-consistency rule."""
-
-    #: Chi-square quantile of the Mahalanobis gate (dof 6, or 3 in planar mode): a consistent
-    #: fix is wrongly gated once in 1 / (1 - q) fixes.
-    chi2_quantile: float = Field(0.999, gt=0, lt=1)
-    #: A fix whose own RMS reprojection error exceeds this is never used (a glint, blur, a bad
-    #: corner): good AprilTag corners are at 0.1-0.5 px.
-    max_reproj_err_px: float = Field(2.0, gt=0)
-    #: IPPE ambiguity ratio above which a fix is refused (None: no limit; the chi-square gate
-    #: already refuses a flipped branch once the state is known).
-    max_ambiguity_ratio: float | None = Field(None, gt=0)
-    #: Camera-to-tag range above which a fix is refused (None: no limit).
-    max_range_m: float | None = Field(None, gt=0)
-    #: Mutually consistent fixes required at start-up and after a gap before any is applied.
-    k_consistent: int = Field(3, ge=1)
-    #: The k fixes must lie within this window.
-    consistency_window_s: float = Field(3.0, gt=0)
-    #: A gap (re-acquisition needs k consistent fixes again): no accepted fix for this long ...
-    gap_s: float = Field(10.0, gt=0)
-    #: ... or over this much travel.
-    gap_m: float = Field(5.0, gt=0)
-
-
 class CapConfig(StrictModel):
     """Largest jump of the published ``map -> base`` (at the robot's pose) per update."""
 
@@ -105,6 +81,19 @@ class CapConfig(StrictModel):
     #: Publish the new correction at once on (re)initialization (a declared re-localization)
     #: instead of walking to it at the capped rate.
     snap_on_initialize: bool = True
+    #: Speed limit of the published correction at the robot's pose, m/s and deg/s (beside the
+    #: per-update cap: a stream of accepted fixes cannot walk the correction faster than this;
+    #: the remainder is carried). None: no limit.
+    max_speed_m_s: float | None = Field(None, gt=0)
+    max_rate_deg_s: float | None = Field(None, gt=0)
+
+
+class OutputConfig(StrictModel):
+    """What the node publishes and how often (stream time)."""
+
+    #: ``map -> odom`` transform and pose-with-covariance messages per second (0: at every
+    #: odometry sample).
+    publish_rate_hz: float = Field(10.0, ge=0, le=1000)
 
 
 class KidnapConfig(StrictModel):
@@ -173,6 +162,9 @@ class LocalizerConfig(StrictModel):
     kidnap: KidnapConfig = KidnapConfig()
     suspect: SuspectConfig = SuspectConfig()
     filter: FilterConfig = FilterConfig()
+    tags: TagSensorConfig = TagSensorConfig()
+    supervisor: SupervisorConfig = SupervisorConfig()
+    output: OutputConfig = OutputConfig()
 
     @classmethod
     def from_yaml_text(cls, text: str, source: str = "<string>") -> LocalizerConfig:

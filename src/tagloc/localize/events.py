@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import logging
 from collections import Counter, deque
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from enum import StrEnum
 
@@ -99,12 +99,16 @@ class EventLog:
         self._events: deque[FilterEvent] = deque(maxlen=max_events)
         self._by_kind: Counter[EventKind] = Counter()
         self._by_source: dict[str, Counter[EventKind]] = {}
+        #: Called with every event as it is appended (the streaming node's sinks).
+        self.listeners: list[Callable[[FilterEvent], None]] = []
 
     def append(self, event: FilterEvent) -> FilterEvent:
         """Record ``event`` (and log it) and return it."""
         self._events.append(event)
         self._by_kind[event.kind] += 1
         self._by_source.setdefault(event.source, Counter())[event.kind] += 1
+        for listener in self.listeners:
+            listener(event)
         level = (
             logging.WARNING
             if event.kind is EventKind.SUSPECT_SOURCE

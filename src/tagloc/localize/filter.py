@@ -175,6 +175,7 @@ class MapOdomFilter:
         max_iterations: int,
         relinearize_tol: float, history_size: int, max_events: int,
         calibration: CalibrationModel | None = None,
+        speed_limit: tuple[float, float] | None = None,
     ) -> None:  # fmt: skip
         self._buffer = buffer
         self.map_frame, self.odom_frame, self.base_frame = map_frame, odom_frame, base_frame
@@ -210,7 +211,7 @@ class MapOdomFilter:
         self._batch: tuple[tuple[TagFix, EventKind], ...] = ()
         self.batch_serial = 0
         self.events = EventLog(max_events)
-        self._out = CorrectionPublisher(cap, history_size, planar, self._capped)
+        self._out = CorrectionPublisher(cap, history_size, planar, self._capped, speed_limit)
         self._X: Pose | None = None
         self._c = np.zeros(self._nc)  # odometry calibration (module motion)
         self._P = np.zeros((self._n, self._n))  # [pose tangent, calibration]
@@ -276,7 +277,7 @@ class MapOdomFilter:
             max_iterations=config.filter.max_iterations,
             relinearize_tol=config.filter.relinearize_tol,
             history_size=config.filter.history_size, max_events=config.filter.max_events,
-            calibration=calibration,
+            calibration=calibration, speed_limit=_speed_limit(config),
         )  # fmt: skip
 
     # ----- outputs ---------------------------------------------------------------------------
@@ -284,6 +285,11 @@ class MapOdomFilter:
     def initialized(self) -> bool:
         """True once the state exists (after ``k`` consistent fixes or :meth:`initialize`)."""
         return self._X is not None
+
+    @property
+    def reacquiring(self) -> bool:
+        """True after a gap until ``k`` consistent fixes re-acquire the state."""
+        return self._gap
 
     @property
     def stamp_ns(self) -> int:
@@ -859,3 +865,11 @@ class MapOdomFilter:
         if d2 is not None and threshold is None:
             threshold = self.threshold
         return self.events.append(FilterEvent(stamp_ns, kind, source, d2, threshold, detail))
+
+
+def _speed_limit(config: LocalizerConfig) -> tuple[float, float] | None:
+    """``cap.max_speed_m_s`` and ``cap.max_rate_deg_s`` as (m/s, rad/s), None if neither set."""
+    v, w = config.cap.max_speed_m_s, config.cap.max_rate_deg_s
+    if v is None and w is None:
+        return None
+    return (math.inf if v is None else v, math.inf if w is None else math.radians(w))

@@ -11,7 +11,13 @@ CorrectionCap`), carrying the rest to later publications:
 - per odometry step (:meth:`end_step`, called by the filter's ``predict`` at every odometry
   sample): whatever was published since the previous step (updates, the calibrated drift) stays
   within the cap of what was in force then;
+- per odometry step, with a speed limit (``max_speed_m_s``, ``max_rate_rad_s``): the step's
+  change is also bounded by the limit times the step's duration, so a run of accepted fixes
+  cannot walk the correction faster than a planner can follow;
 - a snap, a declared (re)initialization, publishes the estimate as it is.
+
+Every clipped publication is reported (``on_capped``) with which bound held it (``cap`` or
+``speed limit``) and the remainder carried.
 
 Publications never go back in time: one stamped before the latest is recorded at the latest.
 """
@@ -49,9 +55,12 @@ class CorrectionPublisher:
     """
 
     def __init__(
-        self, cap: CorrectionCap, history_size: int, planar: bool, on_capped: CappedHook
-    ) -> None:
+        self, cap: CorrectionCap, history_size: int, planar: bool, on_capped: CappedHook,
+        speed: tuple[float, float] | None = None,
+    ) -> None:  # fmt: skip
         self._cap, self._planar, self._on_capped = cap, planar, on_capped
+        self._speed = speed  # (m/s, rad/s) or None
+        self._step_stamp: int | None = None
         self._history: deque[CorrectionUpdate] = deque(maxlen=history_size)
         self.current: Pose | None = None  # in force now (may be ahead of the history: drift)
         self._cap_ref: Pose | None = None  # in force before the current publication stamp
@@ -101,10 +110,20 @@ class CorrectionPublisher:
     def end_step(self, stamp_ns: int, odom: Callable[[], SE3]) -> None:
         """End an odometry step: clip what changed since the last step to the cap (judged at
         ``odom()``, ``T_odom_base`` at ``stamp_ns``, looked up only if needed) and record it."""
+        last_step, self._step_stamp = self._step_stamp, stamp_ns
         if self.current is None:
             return
         if self._step_ref is not None and self._step_ref is not self.current:
-            clipped = self._clip(self._step_ref, self.current, stamp_ns, odom())
+            cap, label = self._cap, "cap"
+            if self._speed is not None and last_step is not None:
+                dt = max(stamp_ns - last_step, 0) / 1e9
+                v_t, v_r = self._speed[0] * dt, self._speed[1] * dt
+                if v_t < cap.max_translation_m or v_r < cap.max_rotation_rad:
+                    cap = CorrectionCap(
+                        min(v_t, cap.max_translation_m), min(v_r, cap.max_rotation_rad)
+                    )
+                    label = "speed limit"
+            clipped = self._clip(self._step_ref, self.current, stamp_ns, odom(), cap, label)
             if clipped is not None:
                 self.current = clipped
         if self.current is not self._appended:  # drifted or clipped since recorded
@@ -117,13 +136,16 @@ class CorrectionPublisher:
         T = T_map_odom.to_se3() if isinstance(T_map_odom, SE2) else T_map_odom
         self._history.append(CorrectionUpdate(max(stamp_ns, last), T))
 
-    def _clip(self, ref: Pose, target: Pose, stamp_ns: int, odom: SE3) -> Pose | None:
+    def _clip(
+        self, ref: Pose, target: Pose, stamp_ns: int, odom: SE3,
+        cap: CorrectionCap | None = None, label: str = "cap",
+    ) -> Pose | None:  # fmt: skip
         """``target`` moved back to within the cap of ``ref``, both seen at the robot's pose
         ``odom``, or None if it is within already (the remainder is reported, and carried)."""
         A = odom.to_se2() if self._planar else odom
         X_A = target @ A  # type: ignore[operator]
         jump = (ref @ A).inverse() @ X_A  # type: ignore[operator]
-        step, clipped = self._cap.clip(jump)
+        step, clipped = (cap or self._cap).clip(jump)
         if not clipped:
             return None
         # new @ A = ref @ A @ step, built from the target (no round-off build-up)
@@ -131,7 +153,8 @@ class CorrectionPublisher:
         angle = float(np.linalg.norm(rest.log()[2 if self._planar else 3 :]))
         self._on_capped(
             stamp_ns,
-            f"remainder {np.linalg.norm(rest.translation):.3f} m, {math.degrees(angle):.2f} deg",
+            f"{label}: remainder {np.linalg.norm(rest.translation):.3f} m, "
+            f"{math.degrees(angle):.2f} deg",
         )
         out: Pose = X_A @ rest.inverse() @ A.inverse()  # type: ignore[operator]
         return out

@@ -21,7 +21,7 @@ Pure: the same name, seed and duration give the same scenario.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -30,7 +30,7 @@ import numpy.typing as npt
 from tagloc.errors import SimulationError
 from tagloc.geometry import SE3
 from tagloc.localize.config import LocalizerConfig
-from tagloc.localize.fiducial import FiducialConfig
+from tagloc.localize.outputs import OutputSink
 from tagloc.localize.pipeline import FrameTruth, LocalizationPipeline, PipelineTopics
 from tagloc.localize.run import LocalizationRun
 from tagloc.messages import (
@@ -318,7 +318,7 @@ def run_scenario(
     duration_s: float | None = None,
     *,
     config: LocalizerConfig | None = None,
-    fiducial: FiducialConfig | None = None,
+    sinks: Sequence[OutputSink] = (),
 ) -> LocalizationRun:
     """Simulate scenario ``name`` and localize it against the surveyed tag map.
 
@@ -331,9 +331,9 @@ def run_scenario(
     duration_s : float, optional
         Only the first ``duration_s`` s of the ~700 s route.
     config : LocalizerConfig, optional
-        Filter tunables (default: ``LocalizerConfig()``).
-    fiducial : FiducialConfig, optional
-        Fix-source tunables.
+        The node's configuration (default: :func:`scenario_config`).
+    sinks : sequence of OutputSink
+        More sinks for the node's outputs, as they happen (beside the run's recorder).
 
     Returns
     -------
@@ -341,36 +341,46 @@ def run_scenario(
         With ground truth, ``kidnaps_ns`` and ``metadata`` (scenario, seed, description,
         distance travelled, glints injected).
     """
-    return localize_scenario(build_scenario(name, seed, duration_s), config, fiducial)
+    return localize_scenario(build_scenario(name, seed, duration_s), config, sinks=sinks)
 
 
 def localize_scenario(
     scenario: Scenario,
     config: LocalizerConfig | None = None,
-    fiducial: FiducialConfig | None = None,
     source: ScenarioSource | None = None,
+    sinks: Sequence[OutputSink] = (),
 ) -> LocalizationRun:
     """Localize a built scenario (see :func:`run_scenario`) through the message stream.
 
     ``source``: the scenario's stream if already built (it does not depend on
-    ``scenario.tag_map``, so runs of one drive against different maps can share it).
+    ``scenario.tag_map``, so runs of one drive against different maps can share it);
+    ``sinks``: more sinks for the node's outputs as they happen. Unless the configuration sets
+    ``tags.noise``, the tag sensor's ``sigma_px`` is the simulated detector's (as one calibrates
+    it on a real detector's corners).
     """
     if source is None:
         source = ScenarioSource(scenario)
     elif source.scenario.drive is not scenario.drive:
         raise ValueError("localize_scenario: the source was built from another drive")
-    config = config if config is not None else scenario_config()
-    # the tag sensor's noise model calibrated to the simulated detector (as one calibrates
-    # sigma_px on a real detector's corners)
-    noise = NoiseModel(sigma_px=max(scenario.observation.pixel_sigma_px, 0.05))
+    config = calibrated_config(scenario, config if config is not None else scenario_config())
     pipeline = LocalizationPipeline(
-        scenario.tag_map, config, fiducial=fiducial, frame_truth=source.frame_truth,
-        noise=noise, name=f"scenario:{scenario.name}",
+        scenario.tag_map, config, frame_truth=source.frame_truth,
+        name=f"scenario:{scenario.name}", sinks=sinks,
     )  # fmt: skip
     run = pipeline.run(source)
     run.kidnaps_ns = list(scenario.kidnaps_ns)
     run.metadata.update(scenario_metadata(scenario, source))
     return run
+
+
+def calibrated_config(scenario: Scenario, config: LocalizerConfig) -> LocalizerConfig:
+    """``config`` with the tag sensor's ``sigma_px`` set to the simulated detector's, unless
+    the configuration sets ``tags.noise`` itself."""
+    if "noise" in config.tags.model_fields_set:
+        return config
+    noise = NoiseModel(sigma_px=max(scenario.observation.pixel_sigma_px, 0.05))
+    tags = config.tags.model_copy(update={"noise": noise})
+    return config.model_copy(update={"tags": tags})
 
 
 def scenario_config() -> LocalizerConfig:

@@ -1,0 +1,454 @@
+"""The streaming localizer node: messages in, in stamp order; outputs to sinks as they happen.
+
+One code path for simulated and real data, live or replayed (DESIGN.md's data flow). Feed it
+``(topic, record)`` pairs (:mod:`tagloc.messages`) with :meth:`LocalizerNode.feed`; the roles of
+topics are named by :class:`NodeTopics`:
+
+- odometry: an ``OdometryMsg`` on ``odom``, or a ``TransformMsg`` on ``tf`` whose edge is the
+  configured ``odom_frame -> base_frame`` (ROS ``/tf``, dimos's ``world -> base_link``). Each
+  sample is the ``odom -> base`` edge of a bounded :class:`~tagloc.frames.TransformBuffer`, a
+  prediction of the filter, a step of the supervisor, and one :class:`~tagloc.localize.outputs.
+  Estimate` (and a status message when one is due).
+- camera frames: ``TagDetectionsMsg`` (``detections``) or ``ImageMsg`` (``image``, run through
+  the configured detector): held until the odometry covers their stamp, then turned into fixes
+  (:class:`~tagloc.localize.fiducial.FiducialFixSource`) applied at their own stamp.
+- ``CameraInfoMsg`` (``camera_info``) and static ``TransformMsg`` (``base -> camera``) when the
+  camera model or extrinsics are not given; ``GroundTruthMsg`` (``truth``) is passed through.
+
+Bad input is a counted, logged skip (:attr:`LocalizerNode.skipped`: odometry whose stamp does
+not increase, non-finite odometry, a repeated frame stamp, a frame before the camera is known, a
+detector that raised). Memory is bounded: the transform buffer's window, frames waiting for
+odometry, and fixes within the consistency window; everything else leaves through the sinks.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import heapq
+import logging
+import math
+from collections import Counter, OrderedDict, deque
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from tagloc.camera import CameraModel, from_camera_info
+from tagloc.errors import TransformLookupError
+from tagloc.frames import TransformBuffer
+from tagloc.geometry import SE3
+from tagloc.localize.config import LocalizerConfig
+from tagloc.localize.events import EventKind, FilterEvent
+from tagloc.localize.fiducial import FiducialConfig, FiducialFixSource, FrameFixes
+from tagloc.localize.filter import MapOdomFilter
+from tagloc.localize.fix import LocalizeError
+from tagloc.localize.motion import CALIBRATION_PARAMETERS
+from tagloc.localize.outputs import Estimate, NodeOutput, OutputSink
+from tagloc.localize.run import CameraFrameRecord, FixAttempt
+from tagloc.messages import (
+    CameraInfoMsg,
+    GroundTruthMsg,
+    ImageMsg,
+    Message,
+    OdometryMsg,
+    TagDetectionsMsg,
+    TransformMsg,
+)
+from tagloc.supervise import EstimatorState, FixSourceSpec, Supervisor
+from tagloc.tags import TagDetection, TagDetector, TagMap
+
+__all__ = ["FrameTruth", "LocalizerNode", "NodeTopics"]
+
+logger = logging.getLogger(__name__)
+S_NS = 1_000_000_000
+_NAN6 = np.full((6, 6), np.nan)
+_NAN6.flags.writeable = False
+#: Frame stamps remembered to refuse duplicates (a bounded set of the newest).
+_RECENT_FRAMES = 4096
+MARKERS = "markers"
+_FINAL = {EventKind.ACCEPTED, EventKind.INITIALIZED, EventKind.REINITIALIZED_KIDNAP}
+
+
+@dataclass(frozen=True, slots=True)
+class NodeTopics:
+    """Stream topic of each role (the simulator's and :class:`BagSink`'s defaults)."""
+
+    odom: str = "/odom"
+    detections: str = "/tag_detections"
+    image: str = "/camera/image"
+    camera_info: str = "/camera/camera_info"
+    truth: str = "/ground_truth"
+    tf: str = "/tf"
+
+
+@dataclass(frozen=True, slots=True)
+class FrameTruth:
+    """Simulator truth of one camera frame, for the run record only (never for decisions).
+
+    Attributes
+    ----------
+    false_detection : tuple of bool
+        Per detection of the frame's ``TagDetectionsMsg``: injected (a glint) or real.
+    nearest_visible_m : float
+        Camera to the nearest tag truly in view, m (``inf``: none).
+    """
+
+    false_detection: tuple[bool, ...]
+    nearest_visible_m: float
+
+
+@dataclass(slots=True)
+class _Frame:
+    stamp_ns: int
+    frame_id: str
+    detections: tuple[TagDetection, ...]
+
+
+class LocalizerNode:
+    """The node (module docstring). Call :meth:`feed` per message, :meth:`finish` at the end.
+
+    Parameters
+    ----------
+    tag_map : TagMap
+    config : LocalizerConfig, optional
+        The one configuration (``localizer.yaml``).
+    sinks : sequence of OutputSink
+    camera : CameraModel, optional
+        Default: from the first ``CameraInfoMsg``.
+    T_base_cam : SE3, optional
+        Default: the static ``base -> <frame's frame_id>`` transform of the stream.
+    topics : NodeTopics, optional
+    detector : TagDetector, optional
+        For ``ImageMsg`` frames (default: the configured backend and family, on first use).
+    frame_truth : Mapping[int, FrameTruth], optional
+        Simulator truth by frame stamp (fills ``false_detection`` / ``nearest_visible_tag_m``).
+    """
+
+    def __init__(
+        self, tag_map: TagMap, config: LocalizerConfig | None = None,
+        sinks: Sequence[OutputSink] = (), *, camera: CameraModel | None = None,
+        T_base_cam: SE3 | None = None, topics: NodeTopics | None = None,
+        detector: TagDetector | None = None, frame_truth: Mapping[int, FrameTruth] | None = None,
+    ) -> None:  # fmt: skip
+        self.config = cfg = config or LocalizerConfig()
+        self.topics = topics or NodeTopics()
+        self.sinks = list(sinks)
+        self.frames_cfg = cfg.frames
+        self.buffer = TransformBuffer(window_ns=30 * S_NS)
+        self.filter = MapOdomFilter.from_config(cfg, self.buffer)
+        self.filter.events.listeners.append(self._emit)
+        self.supervisor = Supervisor(
+            cfg.supervisor, [FixSourceSpec(MARKERS, "markers", "camera")], cfg.gates.gap_s,
+            cfg.gates.gap_m,
+        )  # fmt: skip
+        self._tag_map = tag_map
+        self._camera, self._T_base_cam, self._detector = camera, T_base_cam, detector
+        self._source: FiducialFixSource | None = None
+        self._truth_info = frame_truth or {}
+        self.skipped: Counter[str] = Counter()
+        self._pending: list[tuple[int, int, _Frame]] = []  # heap by stamp
+        self._seq = 0
+        self._recent_frames: OrderedDict[int, None] = OrderedDict()
+        self._last_odom: int | None = None
+        self._cov_last: np.ndarray | None = None
+        self._cov_revision, self._cov_stamp = -1, 0
+        self._cov_step_ns = round(cfg.process_noise.motion_step_s * S_NS)
+        rate = cfg.output.publish_rate_hz
+        self._publish_ns = 0 if rate == 0 else round(S_NS / rate)
+        self._next_publish = 0
+        # fix attempts and frame records wait here until no batch decision can revise them
+        self._held: deque[FixAttempt | CameraFrameRecord] = deque()
+        self._held_by_id: dict[int, int] = {}  # id(fix) -> serial of its attempt in _held
+        self._held_serial0 = 0  # serial of _held[0]
+        windows = (cfg.gates.consistency_window_s, cfg.kidnap.window_s)
+        self._held_ns = round((max(windows) + 1.0) * S_NS)
+        self._accepted_at: Counter[int] = Counter()  # accepted fixes per frame stamp, in _held
+        self._fix_ns: int | None = None  # last accepted fix
+        self._odometer_m, self._fix_odometer_m = 0.0, 0.0
+        self._last_T: SE3 | None = None
+        self.counts: Counter[str] = Counter()
+
+    # ----- input -----------------------------------------------------------------------------
+    def feed(self, topic: str, msg: Message) -> None:
+        """Consume one stream item (other topics and record types are ignored)."""
+        t, f = self.topics, self.frames_cfg
+        if isinstance(msg, OdometryMsg) and topic == t.odom:
+            self._on_odometry(msg.stamp_ns, msg.T_parent_child)
+        elif isinstance(msg, TransformMsg) and not msg.static:
+            if topic == t.tf and (msg.parent, msg.child) == (f.odom_frame, f.base_frame):
+                self._on_odometry(msg.stamp_ns, msg.T_parent_child)
+        elif isinstance(msg, TagDetectionsMsg) and topic == t.detections:
+            self._queue(_Frame(msg.stamp_ns, msg.frame_id, msg.detections))
+        elif isinstance(msg, ImageMsg) and topic == t.image:
+            detections = self._detect(msg)
+            if detections is not None:
+                self._queue(_Frame(msg.stamp_ns, msg.frame_id, detections))
+        elif isinstance(msg, CameraInfoMsg) and topic == t.camera_info:
+            if self._camera is None:
+                self._camera = from_camera_info(msg.info, f"{topic} CameraInfo")
+        elif isinstance(msg, TransformMsg) and msg.static:
+            self.buffer.set_static(msg.parent, msg.child, msg.T_parent_child)
+        elif isinstance(msg, GroundTruthMsg) and topic == t.truth:
+            self._emit(msg)
+
+    def finish(self) -> None:
+        """Process frames still waiting for odometry and hand on every held record.
+
+        Raises
+        ------
+        LocalizeError
+            If the stream held no usable odometry.
+        """
+        while self._pending:
+            self._process(heapq.heappop(self._pending)[2])
+        self._release(None)
+        if self._last_odom is None:
+            raise LocalizeError(
+                f"no usable odometry on {self.topics.odom!r} or as {self.frames_cfg.odom_frame} "
+                f"-> {self.frames_cfg.base_frame} on {self.topics.tf!r} "
+                f"(skipped: {dict(self.skipped) or 'none'})"
+            )
+
+    # ----- odometry --------------------------------------------------------------------------
+    def _skip(self, reason: str, detail: str) -> None:
+        self.skipped[reason] += 1
+        if self.skipped[reason] == 1:
+            logger.warning("skipped (%s): %s; further ones are counted", reason, detail)
+
+    def _on_odometry(self, stamp: int, T: SE3) -> None:
+        if not (np.isfinite(T.translation).all() and np.isfinite(T.as_quat()).all()):
+            return self._skip("odom_non_finite", f"odometry at {stamp} ns")
+        if self._last_odom is not None and stamp <= self._last_odom:
+            reason = "odom_duplicate_stamp" if stamp == self._last_odom else "odom_stamp_backwards"
+            return self._skip(reason, f"odometry: {stamp} ns after {self._last_odom} ns")
+        self._last_odom = stamp
+        if self._last_T is not None:
+            self._odometer_m += float(np.linalg.norm(T.translation - self._last_T.translation))
+        self._last_T = T
+        f = self.frames_cfg
+        self.buffer.set_transform(f.odom_frame, f.base_frame, stamp, T)
+        self.supervisor.on_input("odometry", stamp)
+        while self._pending and self._pending[0][0] <= stamp:
+            self._process(heapq.heappop(self._pending)[2])
+        self.filter.predict(stamp)
+        self._estimate(stamp, T)
+        return None
+
+    def _estimate(self, stamp: int, T_odom_base: SE3) -> None:
+        """The sample's :class:`Estimate`, the supervisor's step and the status when due. The
+        covariance of ``T_map_base`` is recomputed when the filter's state changed
+        (:attr:`MapOdomFilter.revision`) or a motion step passed, else the last one is repeated
+        (it grows by the odometry random walk of < one step meanwhile)."""
+        flt = self.filter
+        cov = None
+        if flt.initialized:
+            T_map_odom = flt.correction_at(stamp)
+            if flt.revision != self._cov_revision or stamp - self._cov_stamp >= self._cov_step_ns:
+                self._cov_last = flt.pose_at(stamp).cov
+                self._cov_revision, self._cov_stamp = flt.revision, stamp
+            cov = self._cov_last
+        else:
+            T_map_odom = SE3.identity()
+        publish = stamp >= self._next_publish
+        if publish:
+            self._next_publish = stamp + self._publish_ns
+        parent, child = self.frames_cfg.published_edge
+        self._emit(Estimate(stamp, T_odom_base, T_map_odom, cov, flt.initialized, publish,
+                            parent, child))  # fmt: skip
+        state = self._state(stamp, cov)
+        move = self.supervisor.step(stamp, state)
+        if move is not None:
+            self.counts["ladder"] += 1
+            self._emit(move)
+        if self.supervisor.status_due(stamp):
+            self._emit(self.supervisor.status(stamp, state))
+
+    def _state(self, stamp: int, cov: np.ndarray | None) -> EstimatorState:
+        flt = self.filter
+        since_s = math.inf if self._fix_ns is None else (stamp - self._fix_ns) / S_NS
+        since_m = math.inf if self._fix_ns is None else self._odometer_m - self._fix_odometer_m
+        sxy = syaw = math.nan
+        if cov is not None:
+            sxy = math.sqrt(max(float(np.linalg.eigvalsh(cov[:2, :2])[-1]), 0.0))
+            syaw = math.degrees(math.sqrt(max(float(cov[5, 5]), 0.0)))
+        return EstimatorState(flt.initialized, flt.reacquiring, since_s, since_m, sxy, syaw)
+
+    # ----- camera frames ---------------------------------------------------------------------
+    def _queue(self, frame: _Frame) -> None:
+        self.supervisor.on_input("camera", frame.stamp_ns)
+        if frame.stamp_ns in self._recent_frames:
+            return self._skip("frame_duplicate_stamp", f"camera frame at {frame.stamp_ns} ns")
+        self._recent_frames[frame.stamp_ns] = None
+        if len(self._recent_frames) > _RECENT_FRAMES:
+            self._recent_frames.popitem(last=False)
+        self._seq += 1
+        heapq.heappush(self._pending, (frame.stamp_ns, self._seq, frame))
+        return None
+
+    def _detect(self, msg: ImageMsg) -> tuple[TagDetection, ...] | None:
+        tags = self.config.tags
+        try:
+            if self._detector is None:
+                from tagloc.tags import make_detector
+
+                self._detector = make_detector(tags.backend, tags.family)
+            return tuple(self._detector.detect(msg.image))
+        except Exception as exc:  # a detector's failure on one frame must not stop the node
+            self._skip("detector_error", f"frame at {msg.stamp_ns} ns: {exc!r}")
+            return None
+
+    def _fix_source(self, frame: _Frame) -> FiducialFixSource | None:
+        if self._source is not None:
+            return self._source
+        if self._camera is None:
+            self._skip("no_camera_info", f"frame at {frame.stamp_ns} ns before any CameraInfo")
+            return None
+        T_base_cam = self._T_base_cam
+        if T_base_cam is None:
+            try:
+                T_base_cam = self.buffer.lookup(
+                    self.frames_cfg.base_frame, frame.frame_id, frame.stamp_ns
+                )
+            except TransformLookupError as exc:
+                self._skip("no_extrinsics", str(exc))
+                return None
+        tags = self.config.tags
+        fid = FiducialConfig(
+            cov_scale=tags.cov_scale, min_cov_translation_m=tags.min_cov_translation_m,
+            min_cov_rotation_rad=tags.min_cov_rotation_rad, mode=tags.mode,
+            prior_rotation_sigma_rad=tags.prior_rotation_sigma_rad,
+            ambiguity_log_odds_with_prior=tags.ambiguity_log_odds_with_prior,
+            shared_quad_px=tags.shared_quad_px,
+        )  # fmt: skip
+        self._source = FiducialFixSource(
+            self._camera, T_base_cam, self._tag_map, family=tags.family,
+            gates=self.config.gates.observation_gates(), noise=tags.noise, config=fid,
+            map_frame=self.frames_cfg.map_frame,
+        )  # fmt: skip
+        return self._source
+
+    def _process(self, frame: _Frame) -> None:
+        """One camera frame: fixes, the filter's decisions, the frame's record."""
+        source = self._fix_source(frame)
+        if source is None:
+            return
+        truth = self._truth_info.get(frame.stamp_ns)
+        flags = truth.false_detection if truth is not None else None
+        if flags is not None and len(flags) != len(frame.detections):
+            flags = None
+        prior = None
+        if self.filter.initialized:
+            try:
+                prior = self.filter.T_map_base_at(frame.stamp_ns)
+            except TransformLookupError:
+                prior = None
+        result = source.frame_fixes(frame.stamp_ns, frame.detections, prior, flags)
+        self._apply(frame.stamp_ns, result)
+        nearest = truth.nearest_visible_m if truth is not None else _nearest(result)
+        self._hold(CameraFrameRecord(frame.stamp_ns, nearest, len(frame.detections), 0))
+        self._release(frame.stamp_ns - self._held_ns)
+
+    def _apply(self, stamp_ns: int, result: FrameFixes) -> None:
+        for r in result.rejects:
+            self._hold(
+                FixAttempt(
+                    stamp_ns, "" if r.tag_id is None else f"tag:{r.tag_id}",
+                    () if r.tag_id is None else (r.tag_id,), SE3.identity(), _NAN6,
+                    f"rejected:{r.reason}", r.range_m, math.nan, r.false_detection,
+                )
+            )  # fmt: skip
+        flt = self.filter
+        for sourced in result.fixes:
+            fix = sourced.fix
+            serial = flt.batch_serial
+            event = flt.update(fix)
+            self._held_by_id[id(fix)] = self._held_serial0 + len(self._held)
+            self._hold(
+                FixAttempt(
+                    fix.stamp_ns, fix.source, sourced.tag_ids, fix.T_map_base, fix.cov,
+                    event.kind.value, fix.quality.range_m, fix.quality.view_angle_rad,
+                    sourced.false_detection,
+                )
+            )  # fmt: skip
+            if event.kind is not EventKind.PENDING_CONSISTENCY:
+                self._judged(event, fix.quality.reproj_err_px)
+            if flt.batch_serial != serial:
+                self._relabel()
+
+    def _judged(self, event: FilterEvent, reproj_px: float) -> None:
+        """A final decision on a fix: the supervisor's quality books, the last accepted fix."""
+        accepted = event.kind in _FINAL
+        if accepted:
+            self._fix_ns = max(self._fix_ns or event.stamp_ns, event.stamp_ns)
+            self._fix_odometer_m = self._odometer_m
+        nis = math.nan if event.d2 is None else event.d2 / self.filter.dof
+        self.supervisor.on_fix(MARKERS, accepted, nis, reproj_px)
+
+    def _hold(self, record: FixAttempt | CameraFrameRecord) -> None:
+        self._held.append(record)
+
+    def _relabel(self) -> None:
+        """Fixes held earlier and used by a batch decision (start-up, kidnap, re-acquisition)
+        get their final decision."""
+        for fix, kind in self.filter.last_batch:
+            serial = self._held_by_id.get(id(fix))
+            if serial is None or serial < self._held_serial0:
+                continue
+            i = serial - self._held_serial0
+            a = self._held[i]
+            if isinstance(a, FixAttempt) and a.T_map_base is fix.T_map_base:
+                self._held[i] = dataclasses.replace(a, decision=kind.value)
+                self._judged(FilterEvent(fix.stamp_ns, kind), fix.quality.reproj_err_px)
+
+    def _release(self, horizon_ns: int | None) -> None:
+        """Hand on held records stamped before ``horizon_ns`` (all with None), in order."""
+        while self._held and (horizon_ns is None or self._held[0].stamp_ns < horizon_ns):
+            record = self._held.popleft()
+            self._held_serial0 += 1
+            if isinstance(record, FixAttempt):
+                if record.accepted:
+                    self._accepted_at[record.stamp_ns] += 1
+            else:
+                n = self._accepted_at.pop(record.stamp_ns, 0)
+                record = dataclasses.replace(record, n_fixes_accepted=n)
+            self._emit(record)
+        if len(self._held_by_id) > 4 * len(self._held) + 64:
+            self._held_by_id = {
+                k: v for k, v in self._held_by_id.items() if v >= self._held_serial0
+            }
+
+    # ----- output ----------------------------------------------------------------------------
+    def _emit(self, output: NodeOutput) -> None:
+        for sink in self.sinks:
+            sink.write(output)
+
+    def metadata(self) -> dict[str, Any]:
+        """Facts of the run so far (event counts, skips, suspects, calibration, ladder, the
+        resolved configuration)."""
+        flt = self.filter
+        counts = {str(k): v for k, v in flt.events.counts_by_kind().items()}
+        calibration = flt.odometry_calibration
+        calib: dict[str, Any] | None = None
+        if calibration is not None:
+            value, sigma = calibration
+            calib = {
+                name: {"value": float(v), "sigma": float(s)}
+                for name, v, s in zip(CALIBRATION_PARAMETERS, value, sigma, strict=True)
+            }
+        ladder = self.supervisor.ladder
+        return {
+            "odometry_calibration": calib, "skipped": dict(self.skipped), "event_counts": counts,
+            "suspect_sources": list(flt.suspect_sources),
+            "config": self.config.model_dump(mode="json"),
+            "cap_translation_m": self.config.cap.max_translation_m,
+            "cap_rotation_deg": self.config.cap.max_rotation_deg,
+            "ladder": {"seconds_at_level": ladder.seconds_at_levels(),
+                       "transitions": ladder.transitions, "level": int(ladder.level)},
+        }  # fmt: skip
+
+
+def _nearest(result: FrameFixes) -> float:
+    ranges = [s.fix.quality.range_m for s in result.fixes]
+    ranges += [r.range_m for r in result.rejects if math.isfinite(r.range_m)]
+    return min(ranges, default=math.inf)

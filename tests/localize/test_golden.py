@@ -1,0 +1,38 @@
+"""The streaming node reproduces the fused trajectories recorded before it replaced the replay
+pipeline: every scenario's first 90 s (seed 0), every 10th odometry sample, to 1e-9 m.
+
+The golden files (``golden/*.npz``) were written by the replay pipeline this node replaced; a
+change of the filter's numbers is a deliberate act that rewrites them (and says why).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tagloc.geometry import SE3
+from tagloc.sim.scenarios import SCENARIOS, run_scenario
+
+GOLDEN = Path(__file__).parent / "golden"
+DEFAULT = ("default", "kidnap", "moved_tag")  # the rest under --runslow (about 20 s each)
+
+
+@pytest.mark.parametrize(
+    "name",
+    [n if n in DEFAULT else pytest.param(n, marks=pytest.mark.slow) for n in SCENARIOS],
+)
+def test_fused_trajectory_is_unchanged(name: str) -> None:
+    golden = np.load(GOLDEN / f"{name}.npz")
+    run = run_scenario(name, seed=0, duration_s=90.0)
+    idx = np.searchsorted(run.stamps_ns, golden["stamps_ns"])
+    np.testing.assert_array_equal(run.stamps_ns[idx], golden["stamps_ns"])
+    np.testing.assert_array_equal(run.initialized[idx], golden["initialized"])
+    T = run.T_map_base[idx]
+    ref = SE3.from_quat(golden["quat_xyzw_map_base"], golden["t_map_base"])
+    dt = np.linalg.norm(np.asarray(T.translation) - golden["t_map_base"], axis=1)
+    dr = np.linalg.norm(np.asarray((ref.inverse() @ T).log())[:, 3:], axis=1)
+    assert dt.max() <= 1e-9, f"{name}: fused position moved by {dt.max():.3g} m"
+    assert dr.max() <= 1e-9, f"{name}: fused orientation moved by {dr.max():.3g} rad"
+    assert sum(a.accepted for a in run.fixes) == int(golden["accepted"])
