@@ -43,6 +43,35 @@ def _umask() -> int:
     return mask
 
 
+class AtomicTextStream:
+    """A text file written line by line into a temporary file beside ``path``: :meth:`commit`
+    renames it to ``path``, :meth:`abort` removes it (``path`` keeps what it held before)."""
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        self.path = Path(path)
+        self._ctx = atomic_path(self.path)
+        self._tmp = self._ctx.__enter__()
+        self._handle = open(self._tmp, "w", encoding="utf-8")  # noqa: SIM115 (closed below)
+
+    def write(self, text: str) -> None:
+        self._handle.write(text)
+
+    def commit(self) -> Path:
+        """Close and rename into place; return the path."""
+        self._handle.close()
+        self._ctx.__exit__(None, None, None)
+        return self.path
+
+    def abort(self) -> None:
+        """Close and discard."""
+        self._handle.close()
+        self._ctx.__exit__(_AbortedError, _AbortedError(), None)  # the temporary file is removed
+
+
+class _AbortedError(Exception):
+    pass
+
+
 def atomic_write_text(path: str | os.PathLike[str], text: str) -> None:
     """Write ``text`` (UTF-8) to ``path`` atomically."""
     with atomic_path(path) as tmp:

@@ -23,8 +23,8 @@ from tagloc.localize.pipeline import (
 )
 from tagloc.localize.run import LocalizationRun
 from tagloc.messages import Message, OdometryMsg, TagDetectionsMsg
-from tagloc.sim.scenarios import ScenarioSource, build_scenario, scenario_config
-from tagloc.tags import NoiseModel, TagDetection
+from tagloc.sim.scenarios import ScenarioSource, build_scenario, calibrated_config, scenario_config
+from tagloc.tags import TagDetection
 
 MS = 1_000_000
 
@@ -38,8 +38,7 @@ def _run(stream: object, source: ScenarioSource, **kw: object) -> LocalizationRu
     return localize(
         stream,  # type: ignore[arg-type]
         source.scenario.tag_map,
-        scenario_config(),
-        noise=NoiseModel(sigma_px=0.3),
+        calibrated_config(source.scenario, scenario_config()),
         frame_truth=source.frame_truth,
         **kw,  # type: ignore[arg-type]
     )

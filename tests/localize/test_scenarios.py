@@ -19,10 +19,10 @@ from tagloc.sim.scenarios import (
     SCENARIOS,
     ScenarioSource,
     build_scenario,
+    calibrated_config,
     run_scenario,
     scenario_config,
 )
-from tagloc.tags import NoiseModel
 
 S = 1_000_000_000
 REINIT = ("initialized", "reinitialized_kidnap")
@@ -58,7 +58,7 @@ def default_pipeline() -> tuple[LocalizationRun, LocalizationPipeline]:
     scenario = build_scenario("default", seed=0, duration_s=90.0)
     source = ScenarioSource(scenario)
     pipe = LocalizationPipeline(
-        scenario.tag_map, scenario_config(), noise=NoiseModel(sigma_px=0.3),
+        scenario.tag_map, calibrated_config(scenario, scenario_config()),
         frame_truth=source.frame_truth,
     )  # fmt: skip
     return pipe.run(source), pipe

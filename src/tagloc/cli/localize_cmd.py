@@ -1,41 +1,30 @@
-"""``tagloc localize``: a bag or a simulated scenario in; TUM files, events and a bag out.
+"""``tagloc localize``: a bag or a simulated scenario through the streaming node.
 
-Outputs in ``--out`` (each written atomically):
-
-- ``fused.tum`` (``T_map_base = T_map_odom @ T_odom_base`` at every odometry stamp, published
-  corrections), ``odometry.tum`` and, when known, ``truth.tum``;
-- ``events.jsonl``: one filter decision per line; ``fixes.jsonl``: one fix attempt per line;
-- ``localizer.yaml``: the configuration used; ``summary.txt``;
-- ``localization.mcap`` (unless ``--no-bag``): ``/tf`` ``map -> odom`` and
-  ``/localization/pose`` (``PoseWithCovarianceStamped`` of the base in the map) at 10 Hz.
+The same node a robot runs (:class:`~tagloc.localize.node.LocalizerNode`), fed by a bag reader
+or the simulator, its outputs streaming to files in ``--out`` as they happen
+(:mod:`tagloc.io.node_sinks`: ``fused.tum``, ``odometry.tum``, ``truth.tum``, ``events.jsonl``
+with the ladder's transitions, ``fixes.jsonl``, ``status.jsonl``, ``localization.mcap`` with the
+configured frame names, ``summary.json``/``summary.txt``) and the resolved ``localizer.yaml``.
+Each file is renamed into place only when the run ends well; on a failure nothing is left.
 """
 
 from __future__ import annotations
 
-import json
+import logging
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Literal
 
-import numpy as np
 import typer
 
 if TYPE_CHECKING:
-    from tagloc.localize.run import LocalizationRun
+    from tagloc.localize.config import LocalizerConfig
+    from tagloc.localize.node import LocalizerNode
     from tagloc.messages import Message
 
-#: Published outputs are written at most at this rate (Hz of the odometry rows kept).
-OUTPUT_RATE_HZ = 10.0
-
-
-@dataclass(frozen=True, slots=True)
-class LocalizeSummary:
-    """What ``tagloc localize`` reports: files written and headline numbers."""
-
-    files: tuple[Path, ...]
-    lines: tuple[str, ...]
+logger = logging.getLogger(__name__)
 
 
 def write_stream_bag(
@@ -54,90 +43,6 @@ def write_stream_bag(
     return n
 
 
-def summary_lines(run: LocalizationRun) -> list[str]:
-    """Headline numbers of a run (ATE against truth when known)."""
-    accepted = sum(a.accepted for a in run.fixes)
-    offered = sum(not a.decision.startswith("rejected:") for a in run.fixes)
-    lines = [
-        f"{run.name}: {len(run.stamps_ns)} odometry samples, {len(run.frames)} camera frames",
-        f"fixes: {len(run.fixes)} observations, {offered} offered to the filter, "
-        f"{accepted} accepted; suspect sources: {run.metadata.get('suspect_sources', [])}",
-    ]
-    if run.T_map_base_truth is not None:
-        truth = np.asarray(run.T_map_base_truth.translation)
-        fused = np.linalg.norm(np.asarray(run.T_map_base.translation) - truth, axis=1)
-        odom = np.linalg.norm(np.asarray(run.T_odom_base.translation) - truth, axis=1)
-        lines.append(
-            f"ATE RMSE (unaligned): fused {math.sqrt(float(np.mean(fused**2))):.3f} m, "
-            f"odometry only {math.sqrt(float(np.mean(odom**2))):.3f} m"
-        )
-    return lines
-
-
-def write_outputs(run: LocalizationRun, out: Path, *, bag: bool = True) -> LocalizeSummary:
-    """Write a run's files to ``out`` (module docstring); every file atomically."""
-    from tagloc.fileutil import atomic_write_text
-    from tagloc.io import write_tum
-
-    out.mkdir(parents=True, exist_ok=True)
-    files = [out / "fused.tum", out / "odometry.tum"]
-    write_tum(files[0], run.stamps_ns, run.T_map_base)
-    write_tum(files[1], run.stamps_ns, run.T_odom_base)
-    if run.T_map_base_truth is not None:
-        files.append(out / "truth.tum")
-        write_tum(files[-1], run.stamps_ns, run.T_map_base_truth)
-    events = [
-        {"stamp_ns": e.stamp_ns, "kind": str(e.kind), "source": e.source, "d2": e.d2,
-         "threshold": e.threshold, "detail": e.detail}
-        for e in run.events
-    ]  # fmt: skip
-    fixes = [
-        {"stamp_ns": a.stamp_ns, "source": a.source, "decision": a.decision,
-         "range_m": _num(a.range_m), "view_angle_rad": _num(a.view_angle_rad),
-         "false_detection": a.false_detection}
-        for a in run.fixes
-    ]  # fmt: skip
-    for name, rows in (("events.jsonl", events), ("fixes.jsonl", fixes)):
-        files.append(out / name)
-        atomic_write_text(files[-1], "".join(json.dumps(r) + "\n" for r in rows))
-    config = run.metadata.get("config")
-    if isinstance(config, dict):
-        import yaml
-
-        files.append(out / "localizer.yaml")
-        atomic_write_text(files[-1], yaml.safe_dump(config, sort_keys=False))
-    if bag:
-        files.append(out / "localization.mcap")
-        _write_output_bag(run, files[-1])
-    lines = summary_lines(run)
-    files.append(out / "summary.txt")
-    atomic_write_text(files[-1], "\n".join(lines) + "\n")
-    return LocalizeSummary(tuple(files), tuple(lines))
-
-
-def _num(value: float) -> float | None:
-    return value if math.isfinite(value) else None
-
-
-def _write_output_bag(run: LocalizationRun, path: Path) -> None:
-    from tagloc.io import BagSink, PoseWithCovarianceMsg, TransformMsg
-
-    stamps = run.stamps_ns
-    step = max(1, round(len(stamps) / max((stamps[-1] - stamps[0]) / 1e9 * OUTPUT_RATE_HZ, 1)))
-    T_map_base = run.T_map_base
-    with BagSink(path, "mcap", overwrite=True) as sink:
-        for i in range(0, len(stamps), step):
-            if not run.initialized[i]:
-                continue
-            stamp = int(stamps[i])
-            sink.write("/tf", TransformMsg(stamp, "map", "odom", run.T_map_odom[i]))
-            cov = run.cov_map_base[i]
-            if np.isfinite(cov).all():
-                sink.write(
-                    "/localization/pose", PoseWithCovarianceMsg(stamp, "map", T_map_base[i], cov)
-                )
-
-
 def localize(
     bag: Annotated[Path | None, typer.Argument(help="Input bag / MCAP.")] = None,
     scenario: Annotated[str | None, typer.Option(help="Simulated scenario instead.")] = None,
@@ -152,48 +57,127 @@ def localize(
     truth_topic: Annotated[str, typer.Option(help="Ground truth.")] = "/ground_truth",
     seed: Annotated[int, typer.Option(help="Scenario seed.")] = 0,
     duration: Annotated[float | None, typer.Option(help="Scenario: first N s only.")] = None,
+    tf_topic: Annotated[str, typer.Option(help="Odometry as /tf (odom -> base).")] = "/tf",
     no_bag: Annotated[bool, typer.Option("--no-bag", help="No localization.mcap.")] = False,
+    realtime: Annotated[
+        bool, typer.Option("--realtime", help="Pace by the wall clock; detect on a worker.")
+    ] = False,
+    speed: Annotated[float | None, typer.Option(help="With --realtime: speed factor.")] = 1.0,
 ) -> None:  # fmt: skip
-    """Localize a bag or a simulated scenario against a tag map; write TUM, events, a bag."""
+    """Localize a bag or a simulated scenario against a tag map, streaming every output to files."""
     from rich.console import Console
 
     from tagloc.localize import LocalizeError, load_localizer_config
 
     if (bag is None) == (scenario is None):
         raise LocalizeError("give exactly one input: a bag path or --scenario NAME")
+    if duration is not None and not (math.isfinite(duration) and duration > 0):
+        raise LocalizeError(f"--duration: must be a positive number of seconds, got {duration}")
+    if speed is not None and not (math.isfinite(speed) and speed > 0):
+        raise LocalizeError(f"--speed: must be a positive factor, got {speed}")
+    if seed < 0:
+        raise LocalizeError(f"--seed: must be >= 0, got {seed}")
+    if out.exists() and not out.is_dir():
+        raise LocalizeError(f"--out: {out} exists and is not a directory")
     cfg = None if config is None else load_localizer_config(config)
+    topics = (odom_topic, detections_topic, image_topic, camera_info_topic, truth_topic, tf_topic)
     if scenario is not None:
-        from tagloc.sim.scenarios import run_scenario
-
-        run = run_scenario(scenario, seed=seed, duration_s=duration, config=cfg)
+        wired = _scenario_node(scenario, seed, duration, cfg)
     else:
         assert bag is not None
-        run = _localize_bag(
-            bag, tags, cfg, cameras,
-            (odom_topic, detections_topic, image_topic, camera_info_topic, truth_topic),
-        )  # fmt: skip
-    result = write_outputs(run, out, bag=not no_bag)
+        wired = _bag_node(bag, tags, cfg, cameras, topics)
+    written, lines = run_node(wired, out, bag=not no_bag, realtime=speed if realtime else None)
     console = Console()
-    for line in result.lines:
+    for line in lines:
         console.print(line)
-    console.print(f"wrote {len(result.files)} files to {out}")
+    console.print(f"wrote {len(written)} files to {out}")
 
 
-def _localize_bag(
-    bag: Path, tags: Path | None, cfg: object, cameras: Path | None, topics: tuple[str, ...]
-) -> LocalizationRun:
+@dataclass(slots=True)
+class WiredNode:
+    """A node and the stream that feeds it."""
+
+    node: LocalizerNode
+    stream: Iterable[tuple[str, Message]]
+    name: str
+
+
+def run_node(
+    wired: WiredNode, out: Path, *, bag: bool = True, realtime: float | None = None
+) -> tuple[list[Path], list[str]]:
+    """Feed the stream through the node with its outputs streaming to files in ``out``
+    (:class:`~tagloc.io.node_sinks.RunFilesSink`); on any failure nothing of this run is left.
+    ``realtime``: pace by the wall clock at this speed, detection on a worker thread."""
+    from tagloc.fileutil import atomic_write_text
+    from tagloc.io.node_sinks import RunFilesSink
+
+    node = wired.node
+    sink = RunFilesSink(out, node.config.frames.map_frame, bag=bag, name=wired.name)
+    node.sinks.append(sink)
+    try:
+        if realtime is not None:
+            from tagloc.localize.realtime import run_realtime
+
+            run_realtime(node, wired.stream, speed=realtime)
+        else:
+            for topic, msg in wired.stream:
+                node.feed(topic, msg)
+            node.finish()
+        if sink.counts["odometry"] and not sink.counts["frames"]:
+            logger.warning("no camera frame reached the node: check the detections/image topic")
+    except BaseException:
+        sink.abort()
+        raise
+    written, lines = sink.close(node.metadata())
+    atomic_write_text(out / "localizer.yaml", node.config.to_yaml_text())
+    return [*written, out / "localizer.yaml"], lines
+
+
+def _scenario_node(
+    name: str, seed: int, duration: float | None, cfg: LocalizerConfig | None
+) -> WiredNode:
+    from tagloc.localize.node import LocalizerNode
+    from tagloc.sim.scenarios import (
+        ScenarioSource,
+        build_scenario,
+        calibrated_config,
+        scenario_config,
+    )
+
+    scenario = build_scenario(name, seed=seed, duration_s=duration)
+    source = ScenarioSource(scenario)
+    config = calibrated_config(scenario, cfg if cfg is not None else scenario_config())
+    node = LocalizerNode(scenario.tag_map, config, frame_truth=source.frame_truth)
+    return WiredNode(node, source, f"scenario:{name}")
+
+
+def _bag_node(
+    bag: Path, tags: Path | None, cfg: LocalizerConfig | None, cameras: Path | None,
+    topics: tuple[str, ...],
+) -> WiredNode:  # fmt: skip
     from tagloc.io import BagSource, load_kalibr_cameras
     from tagloc.localize import LocalizeError
-    from tagloc.localize.pipeline import PipelineTopics, localize
+    from tagloc.localize.node import LocalizerNode, NodeTopics
     from tagloc.tags import load_tag_map
 
     if tags is None:
         raise LocalizeError("a bag needs the tag map: --tags tags.yaml")
     tag_map = load_tag_map(tags)
     camera = None if cameras is None else next(iter(load_kalibr_cameras(cameras).values()))
-    roles = PipelineTopics(*topics)
+    roles = NodeTopics(*topics)
     source = BagSource(bag)
+    if roles.odom not in source.bag_topics and roles.tf not in source.bag_topics:
+        raise LocalizeError(
+            f"{bag}: no odometry: neither {roles.odom!r} nor {roles.tf!r} is in the bag "
+            f"(topics: {', '.join(sorted(source.bag_topics)) or 'none'})"
+        )
+    if roles.detections not in source.bag_topics and roles.image not in source.bag_topics:
+        raise LocalizeError(
+            f"{bag}: no camera frames: neither {roles.detections!r} nor {roles.image!r} is in "
+            f"the bag (topics: {', '.join(sorted(source.bag_topics)) or 'none'})"
+        )
     wanted = [t for t in topics if t in source.bag_topics]
     wanted += [t for t in source.bag_topics if t.rstrip("/").endswith("tf_static")]
     source = BagSource(bag, sorted(set(wanted)))
-    return localize(source, tag_map, cfg, camera=camera, topics=roles, name=bag.name)  # type: ignore[arg-type]
+    node = LocalizerNode(tag_map, cfg, camera=camera, topics=roles)
+    return WiredNode(node, source, bag.name)

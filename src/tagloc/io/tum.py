@@ -25,7 +25,7 @@ from tagloc.geometry import SE3
 from tagloc.io.errors import InputNotFoundError, TrajectoryFileError
 
 Int64Array = npt.NDArray[np.int64]
-_HEADER = "# timestamp[s] tx ty tz qx qy qz qw (tagloc: body pose in the trajectory frame)\n"
+TUM_HEADER = "# timestamp[s] tx ty tz qx qy qz qw (tagloc: body pose in the trajectory frame)\n"
 
 
 def write_tum(path: str | os.PathLike[str], stamps_ns: npt.ArrayLike, T_map_base: SE3) -> None:
@@ -67,11 +67,16 @@ def write_tum(path: str | os.PathLike[str], stamps_ns: npt.ArrayLike, T_map_base
             f"after stamps_ns[{i}] = {int(stamps[i])}"
         )
     values = np.hstack([poses.translation, poses.as_quat()]).tolist()
-    lines = [
-        f"{s // 1_000_000_000}.{s % 1_000_000_000:09d} " + " ".join(map(repr, row)) + "\n"
-        for s, row in zip(stamps.tolist(), values, strict=True)
-    ]
-    atomic_write_text(path, _HEADER + "".join(lines))
+    lines = [tum_line(s, row) for s, row in zip(stamps.tolist(), values, strict=True)]
+    atomic_write_text(path, TUM_HEADER + "".join(lines))
+
+
+def tum_line(stamp_ns: int, values: list[float]) -> str:
+    """One TUM line: the stamp with 9 decimals, then ``tx ty tz qx qy qz qw`` (``values``) in
+    the shortest repr that reads back exactly."""
+    return f"{stamp_ns // 1_000_000_000}.{stamp_ns % 1_000_000_000:09d} " + " ".join(
+        map(repr, values)
+    ) + "\n"
 
 
 def read_tum(path: str | os.PathLike[str], *, quat_tol: float = 1e-3) -> tuple[Int64Array, SE3]:
