@@ -28,8 +28,7 @@ import numpy as np
 from tagloc.localize.pipeline import LocalizationPipeline
 from tagloc.messages import ImageMsg, Message, OdometryMsg
 from tagloc.sim import render_frames
-from tagloc.sim.scenarios import ScenarioSource, build_scenario, scenario_config
-from tagloc.tags import NoiseModel
+from tagloc.sim.scenarios import ScenarioSource, build_scenario, calibrated_config, scenario_config
 
 S = 1_000_000_000
 
@@ -51,7 +50,7 @@ def _wrap(obj: Any, name: str, out: list[int]) -> None:
 def _pipeline(source: ScenarioSource) -> LocalizationPipeline:
     scenario = source.scenario
     return LocalizationPipeline(
-        scenario.tag_map, scenario_config(), noise=NoiseModel(sigma_px=0.3),
+        scenario.tag_map, calibrated_config(scenario, scenario_config()),
         frame_truth=source.frame_truth,
     )  # fmt: skip
 

@@ -81,3 +81,49 @@ def test_bad_input_is_one_line_and_writes_nothing(
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and message in lines[0], result.stderr
     assert not out.exists()
+
+
+def test_bag_output_uses_the_configured_frame_names(
+    drive_bag: tuple[Path, Path], tmp_path: Path
+) -> None:
+    """dimos naming: the odometry origin is ``world`` and the published edge ``world -> map``.
+    The bag's odometry is ``odom -> base_link``, so the node is told its frame (``odom_frame``)
+    and publishes the inverse edge under the dimos names."""
+    from tagloc.geometry import SE3
+    from tagloc.io import TransformMsg
+
+    path, tags = drive_bag
+    config = tmp_path / "localizer.yaml"
+    config.write_text("frames: {convention: dimos, odom_frame: odom}\n")
+    out = tmp_path / "out"
+    done = run_tagloc(
+        "localize", str(path), "--tags", str(tags), "--config", str(config), "--out", str(out)
+    )
+    assert done.returncode == 0, done.stderr
+    tf = [m for t, m in BagSource(out / "localization.mcap") if t == "/tf"]
+    assert tf and all(isinstance(m, TransformMsg) for m in tf)
+    assert {(m.parent, m.child) for m in tf} == {("odom", "map")}  # type: ignore[union-attr]
+    poses = {m.stamp_ns: m for t, m in BagSource(out / "localization.mcap") if t != "/tf"}
+    for m in tf[:: max(len(tf) // 20, 1)]:
+        pose = poses[m.stamp_ns]
+        assert pose.frame_id == "map"  # type: ignore[union-attr]
+        # T_map_base = T_map_odom @ T_odom_base and the bag carries T_odom_map
+        T_odom_map: SE3 = m.T_parent_child  # type: ignore[union-attr]
+        T_odom_base = T_odom_map @ pose.T_frame_child  # type: ignore[union-attr]
+        assert np.all(np.isfinite(np.asarray(T_odom_base.translation)))
+    saved = (out / "localizer.yaml").read_text()
+    assert "convention: dimos" in saved and "publish: odom_to_map" in saved
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["ladder"]["transitions"] >= 1
+    assert sum(summary["ladder"]["seconds_at_level"].values()) > 14.0
+
+
+def test_a_wrong_detections_topic_is_one_line(drive_bag: tuple[Path, Path], tmp_path: Path) -> None:
+    path, tags = drive_bag
+    out = tmp_path / "out"
+    done = run_tagloc(
+        "localize", str(path), "--tags", str(tags), "--out", str(out),
+        "--detections-topic", "/nope", "--image-topic", "/nope2",
+    )  # fmt: skip
+    assert done.returncode == 1 and "no camera frames" in done.stderr, done.stderr
+    assert not out.exists() or not list(out.iterdir())

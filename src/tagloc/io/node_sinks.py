@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from tagloc.fileutil import AtomicTextStream, atomic_write_text
+from tagloc.geometry import SE3
 from tagloc.io.bag_writer import BagSink
 from tagloc.io.tum import TUM_HEADER, tum_line
 from tagloc.localize.events import FilterEvent
@@ -110,9 +111,9 @@ class RunFilesSink:
         self.counts["odometry"] += 1
         self._last = e
         T = e.T_map_base
-        self._files["fused.tum"].write(tum_line(e.stamp_ns, [*T.translation, *T.as_quat()]))
+        self._files["fused.tum"].write(tum_line(e.stamp_ns, _values(T)))
         A = e.T_odom_base
-        self._files["odometry.tum"].write(tum_line(e.stamp_ns, [*A.translation, *A.as_quat()]))
+        self._files["odometry.tum"].write(tum_line(e.stamp_ns, _values(A)))
         if self._bag is not None and e.publish and e.initialized:
             T_pc = e.T_parent_child(self.map_frame)
             self._bag.write("/tf", TransformMsg(e.stamp_ns, e.parent, e.child, T_pc))
@@ -124,7 +125,7 @@ class RunFilesSink:
         if "truth.tum" not in self._files:
             self._open("truth.tum").write(TUM_HEADER)
         T = msg.T_frame_child
-        self._files["truth.tum"].write(tum_line(msg.stamp_ns, [*T.translation, *T.as_quat()]))
+        self._files["truth.tum"].write(tum_line(msg.stamp_ns, _values(T)))
         e = self._last
         if e is not None and e.stamp_ns == msg.stamp_ns:
             t = np.asarray(T.translation)
@@ -195,6 +196,10 @@ class RunFilesSink:
         self._files.clear()
         if self._bag is not None:
             self._bag.abort()
+
+
+def _values(T: SE3) -> list[float]:
+    return [*np.asarray(T.translation).tolist(), *np.asarray(T.as_quat()).tolist()]
 
 
 def _num(value: float) -> float | None:
