@@ -116,7 +116,7 @@ def render_html(ev: Evaluation, metadata: dict[str, object]) -> str:
     """The report as one self-contained HTML page."""
     s = ev.summary
     parts = [f"<h1>tagloc evaluation: {html.escape(s.name)}</h1>", _overview(s, metadata)]
-    parts += ["<h2>Checks (issue 4 targets)</h2>", _checks_table(s)]
+    parts += ["<h2>Checks</h2>", _checks_table(s)]
     parts += ["<h2>Estimates of T_map_base</h2>", _estimators_table(s)]
     if s.has_truth:
         from tagloc.eval import report_plots as plots
@@ -126,6 +126,7 @@ def render_html(ev: Evaluation, metadata: dict[str, object]) -> str:
         parts += ["<h2>Error histogram</h2>", _img(plots.error_histogram_png(ev), "histogram")]
         parts += ["<h2>Correction jumps</h2>", _img(plots.jumps_png(ev), "jumps")]
         parts += ["<h2>Fix acceptance</h2>", _img(plots.acceptance_png(ev), "acceptance")]
+    parts += [_ladder_section(ev), _bounds_section(s)]
     parts += [_fixes_section(s), _events_section(s)]
     config = html.escape(json.dumps(s.config.model_dump(mode="json"), indent=1))
     parts += [f"<h2>Evaluation config</h2><pre>{config}</pre>"]
@@ -133,6 +134,35 @@ def render_html(ev: Evaluation, metadata: dict[str, object]) -> str:
     return (
         f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{title}</title>"
         f"<style>{_CSS}</style></head><body>{''.join(parts)}</body></html>\n"
+    )
+
+
+def _ladder_section(ev: Evaluation) -> str:
+    from tagloc.eval import report_plots as plots
+
+    lad = ev.summary.ladder
+    at = [[k, f"{v:.1f}"] for k, v in lad.seconds_at_level.items()]
+    moves = [[f"{t:.2f}", f"{a} -> {b}", why] for t, a, b, why in lad.transitions]
+    return (
+        "<h2>Degradation ladder</h2><p>1 lidar nominal, 2 markers carry, 3 markers alone, "
+        "4 on-board odometry only (the status says stale).</p>"
+        + (_img(plots.ladder_png(ev), "ladder") if ev.ladder_steps is not None else "")
+        + _table(["level", "time (s)"], at)
+        + _table(["t (s)", "move", "reason"], moves[:200])
+    )
+
+
+def _bounds_section(s: EvalSummary) -> str:
+    b = s.bounds
+    rows = [
+        ["largest jump, unclipped estimate", b.largest_unclipped_m, b.largest_unclipped_deg],
+        ["largest jump, published", b.largest_published_m, b.largest_published_deg],
+    ]
+    return (
+        "<h2>Correction bounds</h2>"
+        + _table(["per odometry step", "m", "deg"], rows)
+        + f"<p>Publications bound by the per-update cap: {b.n_capped}; by the speed limit: "
+        f"{b.n_speed_limited}.</p>"
     )
 
 

@@ -158,3 +158,17 @@ def jumps_png(ev: Evaluation) -> bytes:
     ax.grid(True, alpha=0.3)
     fig.tight_layout()
     return _png(fig)
+
+
+def ladder_png(ev: Evaluation) -> bytes:
+    """The degradation ladder's level over the drive (1 best, 4 odometry only)."""
+    assert ev.ladder_steps is not None
+    t_s, level = ev.ladder_steps
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(9, 2.2))
+    ax.step(t_s, level, where="post", color="k")
+    ax.set_ylim(4.5, 0.5)
+    ax.set_yticks([1, 2, 3, 4], ["1 lidar", "2 markers carry", "3 markers alone", "4 odometry"])
+    ax.set_xlabel("time (s)")
+    ax.grid(alpha=0.3)
+    return _png(fig)

@@ -4,8 +4,8 @@
 odometry only, fused, naive baseline), ATE (``evo`` APE, translation, unaligned: ``odom`` and
 ``map`` coincide at the start) and RPE per metre for each, the reliability protocol, acceptance
 against range and angle, false fixes, suspect sources, kidnap recovery, the largest correction
-jump, and the pass/fail checks of issue 4. :func:`summary_to_dict` gives the stable,
-JSON-ready form written as ``summary.json``.
+jump, what the degradation ladder and the correction's bounds did, and the pass/fail checks.
+:func:`summary_to_dict` gives the stable, JSON-ready form written as ``summary.json``.
 """
 
 from __future__ import annotations
@@ -33,6 +33,13 @@ from tagloc.eval.protocol import (
     Reliability,
     reliability_protocol,
     relocalization_times,
+)
+from tagloc.eval.supervision import (
+    CorrectionBounds,
+    LadderSummary,
+    correction_bounds,
+    ladder_steps,
+    ladder_summary,
 )
 from tagloc.eval.trajectories import (
     CorrectionJumps,
@@ -122,6 +129,11 @@ class EvalSummary:
         The filter's configured correction cap per update (NaN if not recorded).
     n_jump_steps_over_cap : int
         Stamp steps whose fused correction jump exceeds the translation cap.
+    ladder : LadderSummary
+        Time at each level of the degradation ladder, and its transitions.
+    bounds : CorrectionBounds
+        The unclipped estimate's largest jump beside the published one, and how often the cap
+        and the speed limit bound a publication.
     checks : list of Check
     config : EvalConfig
     """
@@ -142,6 +154,8 @@ class EvalSummary:
     cap_translation_m: float
     cap_rotation_deg: float
     n_jump_steps_over_cap: int
+    ladder: LadderSummary
+    bounds: CorrectionBounds
     checks: list[Check]
     config: EvalConfig
 
@@ -159,6 +173,8 @@ class Evaluation:
     trajectories: RunTrajectories
     errors: dict[str, PoseErrors]
     jumps: dict[str, CorrectionJumps]
+    #: ``(t_s, level)`` of the ladder as a step function (None without a ladder record).
+    ladder_steps: tuple[np.ndarray, np.ndarray] | None = None
 
 
 def evaluate(run: LocalizationRun, config: EvalConfig | None = None) -> Evaluation:
@@ -222,11 +238,16 @@ def evaluate(run: LocalizationRun, config: EvalConfig | None = None) -> Evaluati
         n_jump_steps_over_cap=int(np.count_nonzero(jumps["fused"].translation_m > cap_m + 1e-9))
         if math.isfinite(cap_m)
         else 0,
+        ladder=ladder_summary(run),
+        bounds=correction_bounds(run),
         checks=[],
         config=cfg,
     )
     summary = dataclasses.replace(summary, checks=_checks(summary))
-    return Evaluation(summary=summary, trajectories=traj, errors=errors, jumps=jumps)
+    steps = ladder_steps(run) if run.ladder else None
+    return Evaluation(
+        summary=summary, trajectories=traj, errors=errors, jumps=jumps, ladder_steps=steps
+    )
 
 
 def _score(
@@ -282,7 +303,7 @@ def _snaps_per_frame(run: LocalizationRun, traj: RunTrajectories) -> list[int]:
 
 
 def _checks(s: EvalSummary) -> list[Check]:
-    """The issue's targets, as far as this run can show them."""
+    """The targets, as far as this run can show them."""
     cfg, fused = s.config, s.estimators["fused"]
     ate_target = f"<= {cfg.target_fused_ate_m:g}"
     if s.kidnaps:  # the truth jumps tens of metres at a kidnap: the relocalization check judges
@@ -340,7 +361,8 @@ def summary_to_dict(summary: EvalSummary) -> dict[str, Any]:
     ``duration_s``, ``distance_m``, ``estimators`` (``odometry`` / ``fused`` / ``baseline``),
     ``fixes``, ``acceptance_vs_range``, ``acceptance_vs_angle``, ``n_unknown_range``,
     ``n_unknown_angle``, ``suspect_sources``, ``kidnaps``, ``cap_translation_m``,
-    ``cap_rotation_deg``, ``n_jump_steps_over_cap``, ``checks``, ``config``.
+    ``cap_rotation_deg``, ``n_jump_steps_over_cap``, ``ladder``, ``bounds``, ``checks``,
+    ``config``.
     """
     out: dict[str, Any] = {"schema_version": SUMMARY_SCHEMA_VERSION}
     for field in dataclasses.fields(summary):

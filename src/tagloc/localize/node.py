@@ -241,9 +241,10 @@ class LocalizerNode:
         (:attr:`MapOdomFilter.revision`) or a motion step passed, else the last one is repeated
         (it grows by the odometry random walk of < one step meanwhile)."""
         flt = self.filter
-        cov = None
+        cov = estimate = None
         if flt.initialized:
             T_map_odom = flt.correction_at(stamp)
+            estimate = flt.T_map_odom
             if flt.revision != self._cov_revision or stamp - self._cov_stamp >= self._cov_step_ns:
                 self._cov_last = flt.pose_at(stamp).cov
                 self._cov_revision, self._cov_stamp = flt.revision, stamp
@@ -255,7 +256,7 @@ class LocalizerNode:
             self._next_publish = stamp + self._publish_ns
         parent, child = self.frames_cfg.published_edge
         self._emit(Estimate(stamp, T_odom_base, T_map_odom, cov, flt.initialized, publish,
-                            parent, child))  # fmt: skip
+                            parent, child, estimate))  # fmt: skip
         state = self._state(stamp, cov)
         move = self.supervisor.step(stamp, state)
         if move is not None:

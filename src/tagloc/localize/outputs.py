@@ -67,6 +67,8 @@ class Estimate:
     publish: bool
     parent: str
     child: str
+    #: The filter's estimate before the cap and the speed limit (None before initialization).
+    T_map_odom_estimate: SE3 | None = None
 
     @property
     def T_map_base(self) -> SE3:
@@ -101,6 +103,7 @@ class RunRecorder:
         self._published: list[SE3] = []
         self._covs: list[FloatArray] = []
         self._init: list[bool] = []
+        self._estimate: list[SE3] = []
         self._truth: dict[int, SE3] = {}
         self.fixes: list[FixAttempt] = []
         self.frames: list[CameraFrameRecord] = []
@@ -115,6 +118,8 @@ class RunRecorder:
             self._published.append(output.T_map_odom)
             self._covs.append(_NAN6 if output.cov_map_base is None else output.cov_map_base)
             self._init.append(output.initialized)
+            est = output.T_map_odom_estimate
+            self._estimate.append(output.T_map_odom if est is None else est)
         elif isinstance(output, FilterEvent):
             self.events.append(output)
         elif isinstance(output, FixAttempt):
@@ -136,7 +141,8 @@ class RunRecorder:
             T_map_odom=SE3.stack(self._published), cov_map_base=np.array(self._covs),
             initialized=np.array(self._init, dtype=bool), T_map_base_truth=self._truth_at(stamps),
             fixes=list(self.fixes), frames=list(self.frames), events=list(self.events),
-            metadata=metadata,
+            metadata=metadata, ladder=list(self.ladder),
+            T_map_odom_estimate=SE3.stack(self._estimate) if self._estimate else None,
         )  # fmt: skip
 
     def _truth_at(self, stamps: np.ndarray) -> SE3 | None:

@@ -15,6 +15,8 @@ is in memory, stamped in integer nanoseconds, with frame names in the field name
   reliability protocol (what was truly visible, what was detected, what was accepted).
 - ``events``: the filter's :class:`~tagloc.localize.events.FilterEvent` log.
 - ``kidnaps_ns``: stamps at which the scenario teleported the robot (empty if none).
+- ``ladder``: the supervisor's ladder transitions; ``T_map_odom_estimate``: the filter's own
+  estimate at each row before the cap and the speed limit (None where not recorded).
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ import numpy.typing as npt
 
 from tagloc.geometry import SE3
 from tagloc.localize.events import FilterEvent
+from tagloc.supervise import LadderTransition
 
 __all__ = ["CameraFrameRecord", "FixAttempt", "LocalizationRun"]
 
@@ -119,6 +122,9 @@ class LocalizationRun:
     kidnaps_ns : list of int
     metadata : dict
         Free-form facts for the report (world, seed, config values, wall time).
+    ladder : list of LadderTransition
+    T_map_odom_estimate : SE3 batch of N or None
+        The filter's estimate (unclipped) at each stamp; identity where not initialized.
     """
 
     name: str
@@ -133,6 +139,8 @@ class LocalizationRun:
     events: list[FilterEvent] = field(default_factory=list)
     kidnaps_ns: list[int] = field(default_factory=list)
     metadata: dict[str, object] = field(default_factory=dict)
+    ladder: list[LadderTransition] = field(default_factory=list)
+    T_map_odom_estimate: SE3 | None = None
 
     @property
     def T_map_base(self) -> SE3:
