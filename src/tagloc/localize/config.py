@@ -146,8 +146,9 @@ class FilterConfig(StrictModel):
     relinearize_tol: float = Field(0.05, gt=0)
     #: Published corrections kept for ``correction_at``.
     history_size: int = Field(10_000, ge=1)
-    #: Events kept in the event log (counts are always exact).
-    max_events: int = Field(100_000, ge=1)
+    #: Events kept in the filter's log for inspection (counts are always exact; every event
+    #: also streams to the node's sinks as it happens).
+    max_events: int = Field(1000, ge=1)
 
 
 class LocalizerConfig(StrictModel):

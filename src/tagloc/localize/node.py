@@ -23,11 +23,10 @@ odometry, and fixes within the consistency window; everything else leaves throug
 
 from __future__ import annotations
 
-import dataclasses
 import heapq
 import logging
 import math
-from collections import Counter, OrderedDict, deque
+from collections import Counter, OrderedDict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -43,6 +42,7 @@ from tagloc.localize.events import EventKind, FilterEvent
 from tagloc.localize.fiducial import FiducialConfig, FiducialFixSource, FrameFixes
 from tagloc.localize.filter import MapOdomFilter
 from tagloc.localize.fix import LocalizeError
+from tagloc.localize.held import HeldRecords
 from tagloc.localize.motion import CALIBRATION_PARAMETERS
 from tagloc.localize.outputs import Estimate, NodeOutput, OutputSink
 from tagloc.localize.run import CameraFrameRecord, FixAttempt
@@ -158,12 +158,9 @@ class LocalizerNode:
         self._publish_ns = 0 if rate == 0 else round(S_NS / rate)
         self._next_publish = 0
         # fix attempts and frame records wait here until no batch decision can revise them
-        self._held: deque[FixAttempt | CameraFrameRecord] = deque()
-        self._held_by_id: dict[int, int] = {}  # id(fix) -> serial of its attempt in _held
-        self._held_serial0 = 0  # serial of _held[0]
+        self._held = HeldRecords(self._emit)
         windows = (cfg.gates.consistency_window_s, cfg.kidnap.window_s)
         self._held_ns = round((max(windows) + 1.0) * S_NS)
-        self._accepted_at: Counter[int] = Counter()  # accepted fixes per frame stamp, in _held
         self._fix_ns: int | None = None  # last accepted fix
         self._odometer_m, self._fix_odometer_m = 0.0, 0.0
         self._last_T: SE3 | None = None
@@ -202,7 +199,7 @@ class LocalizerNode:
         """
         while self._pending:
             self._process(heapq.heappop(self._pending)[2])
-        self._release(None)
+        self._held.release(None)
         if self._last_odom is None:
             raise LocalizeError(
                 f"no usable odometry on {self.topics.odom!r} or as {self.frames_cfg.odom_frame} "
@@ -347,12 +344,12 @@ class LocalizerNode:
         result = source.frame_fixes(frame.stamp_ns, frame.detections, prior, flags)
         self._apply(frame.stamp_ns, result)
         nearest = truth.nearest_visible_m if truth is not None else _nearest(result)
-        self._hold(CameraFrameRecord(frame.stamp_ns, nearest, len(frame.detections), 0))
-        self._release(frame.stamp_ns - self._held_ns)
+        self._held.hold(CameraFrameRecord(frame.stamp_ns, nearest, len(frame.detections), 0))
+        self._held.release(frame.stamp_ns - self._held_ns)
 
     def _apply(self, stamp_ns: int, result: FrameFixes) -> None:
         for r in result.rejects:
-            self._hold(
+            self._held.hold(
                 FixAttempt(
                     stamp_ns, "" if r.tag_id is None else f"tag:{r.tag_id}",
                     () if r.tag_id is None else (r.tag_id,), SE3.identity(), _NAN6,
@@ -364,18 +361,19 @@ class LocalizerNode:
             fix = sourced.fix
             serial = flt.batch_serial
             event = flt.update(fix)
-            self._held_by_id[id(fix)] = self._held_serial0 + len(self._held)
-            self._hold(
+            self._held.hold(
                 FixAttempt(
                     fix.stamp_ns, fix.source, sourced.tag_ids, fix.T_map_base, fix.cov,
                     event.kind.value, fix.quality.range_m, fix.quality.view_angle_rad,
                     sourced.false_detection,
-                )
+                ),
+                fix,
             )  # fmt: skip
             if event.kind is not EventKind.PENDING_CONSISTENCY:
                 self._judged(event, fix.quality.reproj_err_px)
-            if flt.batch_serial != serial:
-                self._relabel()
+            if flt.batch_serial != serial:  # a batch decision revised fixes held earlier
+                for old, kind in self._held.relabel(flt.last_batch):
+                    self._judged(FilterEvent(old.stamp_ns, kind), old.quality.reproj_err_px)
 
     def _judged(self, event: FilterEvent, reproj_px: float) -> None:
         """A final decision on a fix: the supervisor's quality books, the last accepted fix."""
@@ -385,39 +383,6 @@ class LocalizerNode:
             self._fix_odometer_m = self._odometer_m
         nis = math.nan if event.d2 is None else event.d2 / self.filter.dof
         self.supervisor.on_fix(MARKERS, accepted, nis, reproj_px)
-
-    def _hold(self, record: FixAttempt | CameraFrameRecord) -> None:
-        self._held.append(record)
-
-    def _relabel(self) -> None:
-        """Fixes held earlier and used by a batch decision (start-up, kidnap, re-acquisition)
-        get their final decision."""
-        for fix, kind in self.filter.last_batch:
-            serial = self._held_by_id.get(id(fix))
-            if serial is None or serial < self._held_serial0:
-                continue
-            i = serial - self._held_serial0
-            a = self._held[i]
-            if isinstance(a, FixAttempt) and a.T_map_base is fix.T_map_base:
-                self._held[i] = dataclasses.replace(a, decision=kind.value)
-                self._judged(FilterEvent(fix.stamp_ns, kind), fix.quality.reproj_err_px)
-
-    def _release(self, horizon_ns: int | None) -> None:
-        """Hand on held records stamped before ``horizon_ns`` (all with None), in order."""
-        while self._held and (horizon_ns is None or self._held[0].stamp_ns < horizon_ns):
-            record = self._held.popleft()
-            self._held_serial0 += 1
-            if isinstance(record, FixAttempt):
-                if record.accepted:
-                    self._accepted_at[record.stamp_ns] += 1
-            else:
-                n = self._accepted_at.pop(record.stamp_ns, 0)
-                record = dataclasses.replace(record, n_fixes_accepted=n)
-            self._emit(record)
-        if len(self._held_by_id) > 4 * len(self._held) + 64:
-            self._held_by_id = {
-                k: v for k, v in self._held_by_id.items() if v >= self._held_serial0
-            }
 
     # ----- output ----------------------------------------------------------------------------
     def _emit(self, output: NodeOutput) -> None:
