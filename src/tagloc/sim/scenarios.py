@@ -13,6 +13,10 @@ moved_tag     tag ``moved_tags`` physically moved after the map was made: observ
               from the moved world, the map from the original
 corridor      a long featureless corridor: the corridor's middle tags removed from world and map
 dropout       camera frames dropped over ``dropout_s``
+camera_unplugged, odometry_stall, clock_jump_back, duplicated_messages
+              stream-level ``faults`` (:mod:`tagloc.sim.faults`, whose table gives the ladder
+              walk each must produce): frames lost, odometry stalled, its clock jumping back,
+              messages sent twice
 ============  ===================================================================================
 
 Pure: the same name, seed and duration give the same scenario.
@@ -42,6 +46,7 @@ from tagloc.messages import (
     TransformMsg,
 )
 from tagloc.sim.drive import Drive, simulate_drive
+from tagloc.sim.faults import ClockJump, DropMessages, DuplicateMessages, StreamFault, apply_faults
 from tagloc.sim.observations import ObservationConfig, simulate_observations
 from tagloc.sim.trajectory import Trajectory
 from tagloc.sim.world import WallMount, World, load_default_world
@@ -79,6 +84,8 @@ class ScenarioSpec:
     kidnap_at_s: float | None = None
     kidnap_skip_s: float = 0.0
     dropout_s: tuple[float, float] | None = None
+    #: Applied to the message stream (:mod:`tagloc.sim.faults`), as a bag would deliver it.
+    faults: tuple[StreamFault, ...] = ()
 
 
 SCENARIOS: dict[str, ScenarioSpec] = {
@@ -106,6 +113,28 @@ SCENARIOS: dict[str, ScenarioSpec] = {
         "corridor tags 1-3 and 5-8 removed: 20 m without tags", remove_tags=(1, 2, 3, 5, 6, 7, 8)
     ),
     "dropout": ScenarioSpec("camera frames dropped from 20 s to 50 s", dropout_s=(20.0, 50.0)),
+    # stream-level faults; each description names the ladder walk it must produce
+    "camera_unplugged": ScenarioSpec(
+        "camera unplugged: no tag detections from 30 s to 50 s (tags in view before and after); "
+        "ladder 3 -> 4 (camera dead) within 1 s of the camera timeout, back to 3 once fixes are "
+        "accepted again",
+        faults=(DropMessages(30.0, 50.0, (TagDetectionsMsg,)),),
+    ),
+    "odometry_stall": ScenarioSpec(
+        "odometry stalled from 40 s to 42 s (camera frames continue); ladder 3 -> 4 (odometry "
+        "dead) and back to 3, nothing skipped, fused error after the stall as without it",
+        faults=(DropMessages(40.0, 42.0, (OdometryMsg,)),),
+    ),
+    "clock_jump_back": ScenarioSpec(
+        "odometry clock jumps 5 s back at 45 s and runs on from there (camera clock unchanged); "
+        "5 s of odometry skipped as stamped backwards, ladder 3 -> 4 (odometry dead)",
+        faults=(ClockJump(45.0, 5.0, (OdometryMsg,)),),
+    ),
+    "duplicated_messages": ScenarioSpec(
+        "every message from 30 s to 40 s sent twice; counted as duplicates, ladder walk and "
+        "fused trajectory those of the drive without duplicates",
+        faults=(DuplicateMessages(30.0, 40.0),),
+    ),
 }
 
 
@@ -140,6 +169,8 @@ class Scenario:
     camera_stamps_ns : (M,) int64
         Frames that exist (dropout removes some).
     kidnaps_ns : list of int
+    faults : tuple of StreamFault
+        Applied to the stream by :class:`ScenarioSource` (empty: the clean stream).
     """
 
     name: str
@@ -149,6 +180,7 @@ class Scenario:
     tag_map: TagMap
     camera_stamps_ns: npt.NDArray[np.int64]
     kidnaps_ns: list[int]
+    faults: tuple[StreamFault, ...] = ()
 
 
 def tag_map_from_world(world: World) -> TagMap:
@@ -205,7 +237,8 @@ def build_scenario(
         lo, hi = (drive.t0_ns + round(s * S_NS) for s in spec.dropout_s)
         stamps = stamps[(stamps < lo) | (stamps > hi)]
     obs = ObservationConfig(seed=seed, **spec.observation)
-    return Scenario(name, drive, obs, true_world, tag_map_from_world(surveyed), stamps, kidnaps)
+    tag_map = tag_map_from_world(surveyed)
+    return Scenario(name, drive, obs, true_world, tag_map, stamps, kidnaps, spec.faults)
 
 
 def _move_tags(world: World, moves: dict[int, tuple[float, float]]) -> World:
@@ -264,7 +297,7 @@ class ScenarioSource:
     Yields, in stamp order: the camera's ``CameraInfoMsg`` and the static ``base -> camera``
     transform at the start, then per odometry stamp an ``OdometryMsg`` and a ``GroundTruthMsg``,
     and per camera frame a ``TagDetectionsMsg`` (before the odometry of the same stamp, as a
-    bag's log-time order has it).
+    bag's log-time order has it); then the scenario's ``faults`` rewrite that stream.
     :attr:`frame_truth` holds what only the simulator knows (glints, tags truly in view).
     """
 
@@ -297,6 +330,10 @@ class ScenarioSource:
         }  # fmt: skip
 
     def __iter__(self) -> Iterator[tuple[str, Message]]:
+        t0 = int(self.scenario.drive.stamps_ns[0])
+        return apply_faults(self._clean(), self.scenario.faults, t0)
+
+    def _clean(self) -> Iterator[tuple[str, Message]]:
         drive, t = self.scenario.drive, self.t
         t0 = int(drive.stamps_ns[0])
         yield t.camera_info, CameraInfoMsg(t0, CAMERA_FRAME, self.camera.to_camera_info())
@@ -399,5 +436,5 @@ def scenario_metadata(scenario: Scenario, source: ScenarioSource) -> dict[str, o
         "distance_m": float(scenario.drive.distance_m[-1] - scenario.drive.distance_m[0]),
         "duration_s": float(scenario.drive.stamps_ns[-1] - scenario.drive.stamps_ns[0]) / S_NS,
         "n_camera_frames": len(source.frames), "glints_injected": int(glints),
-        "world": scenario.world.name,
+        "world": scenario.world.name, "faults": [f.describe() for f in scenario.faults],
     }  # fmt: skip

@@ -1,0 +1,207 @@
+"""Stream-level faults: what goes wrong between the sensors and the node, applied to a stream.
+
+A fault rewrites the ``(topic, record)`` stream of a source (:class:`~tagloc.sim.scenarios.
+ScenarioSource`) the way a bag or a live robot would deliver it after the failure: messages
+lost, sent twice, or stamped by a clock that jumped. The node sees them exactly as from a bag.
+Faults are pure data (:class:`DropMessages`, :class:`DuplicateMessages`, :class:`ClockJump`);
+:func:`apply_faults` chains them. Times are seconds after ``t0_ns`` (the stream's first stamp)
+and a message belongs to a window by its own (original) stamp.
+
+The fault scenarios of :data:`~tagloc.sim.scenarios.SCENARIOS`, the ladder walk each must
+produce, and the walk measured (seed 0, the first 60 s of the office route; the tests are in
+``tests/localize/test_faults.py``). The node starts at level 4 and reaches level 3
+(``markers_alone``: the simulator has no lidar) at its first fix, 6.20 s in:
+
+===================  ============================================================================
+camera_unplugged     no ``TagDetectionsMsg`` from 30 s to 50 s (tags in view before and after).
+                     Expected: 3 -> 4 at the first odometry sample past the camera's
+                     ``supervisor.camera.timeout_s`` (1 s) after the last frame (``markers:
+                     camera dead``); 4 -> 3 once frames are back and the filter accepts again
+                     (20 s is a gap: ``gates.k_consistent`` consistent fixes first).
+                     Measured: 3 -> 4 at 31.00 s, 4 -> 3 at 50.10 s (frames back at 50.03 s).
+odometry_stall       no ``OdometryMsg`` from 40 s to 42 s; camera frames continue. Expected:
+                     3 -> 4 (``odometry dead``) after ``supervisor.odometry.timeout_s``, back to
+                     3 when odometry returns; nothing skipped; the fused error after the stall
+                     that of the clean drive. Measured: nothing skipped, every frame of the stall
+                     used, error as clean from 45 s on; but no ladder move and no status message
+                     at all during the stall (the supervisor steps only at odometry samples).
+clock_jump_back      from 45 s on, odometry stamps are 5 s earlier (a restarted clock; frames
+                     keep the camera's clock). The node refuses odometry whose stamp does not
+                     increase: the 5 s until the clock passes its old latest stamp are skipped
+                     (499 ``odom_stamp_backwards``, 1 ``odom_duplicate_stamp`` where the stamps
+                     meet). Expected: 3 -> 4 (``odometry dead``) after the odometry timeout.
+                     Measured: no move while skipping; 3 -> 4 at stamp 45.00 s (true 50.00 s) for
+                     the markers' quality (mean NIS 19): odometry now lags the camera by 5 s, fixes
+                     are paired with the wrong odometry (kidnap re-initialization at 45.47 s, fused
+                     error 1-4 m against the truth at the same stamp; back to 3 at 78.4 s in a
+                     90 s run, the lag never undone).
+duplicated_messages  every message from 30 s to 40 s sent twice. Expected and measured: 1000
+                     ``odom_duplicate_stamp`` and 300 ``frame_duplicate_stamp`` skips; the walk
+                     (3 at 6.20 s, no other move) and the fused trajectory bit-identical to the
+                     drive without duplicates.
+===================  ============================================================================
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from typing import Protocol
+
+from tagloc.messages import Message
+
+__all__ = ["ClockJump", "DropMessages", "DuplicateMessages", "StreamFault", "apply_faults"]
+
+logger = logging.getLogger(__name__)
+S_NS = 1_000_000_000
+Stream = Iterable[tuple[str, Message]]
+
+
+class StreamFault(Protocol):
+    """A rewrite of a message stream (a fault between the sensors and the node)."""
+
+    def apply(self, stream: Stream, t0_ns: int) -> Iterator[tuple[str, Message]]:
+        """The stream as delivered with the fault; ``t0_ns``: the time origin of the fault's
+        times (the stream's first stamp)."""
+        ...
+
+    def describe(self) -> str:
+        """One line for a run's metadata."""
+        ...
+
+
+def _matches(msg: Message, kinds: tuple[type[Message], ...]) -> bool:
+    return not kinds or isinstance(msg, kinds)
+
+
+def _kind_names(kinds: tuple[type[Message], ...]) -> str:
+    return ", ".join(k.__name__ for k in kinds) or "every message"
+
+
+@dataclass(frozen=True, slots=True)
+class DropMessages:
+    """Messages of ``kinds`` stamped in ``[start_s, end_s)`` are lost (a sensor unplugged, a
+    driver stalled).
+
+    Attributes
+    ----------
+    start_s, end_s : float
+        The silence, seconds after ``t0_ns``.
+    kinds : tuple of type
+        Record types dropped (empty: every record).
+    """
+
+    start_s: float
+    end_s: float
+    kinds: tuple[type[Message], ...] = ()
+
+    def apply(self, stream: Stream, t0_ns: int) -> Iterator[tuple[str, Message]]:
+        lo, hi = t0_ns + round(self.start_s * S_NS), t0_ns + round(self.end_s * S_NS)
+        logged = False
+        for topic, msg in stream:
+            if lo <= msg.stamp_ns < hi and _matches(msg, self.kinds):
+                if not logged:
+                    logger.info("fault: %s", self.describe())
+                    logged = True
+                continue
+            yield topic, msg
+
+    def describe(self) -> str:
+        return f"{_kind_names(self.kinds)} dropped from {self.start_s:g} s to {self.end_s:g} s"
+
+
+@dataclass(frozen=True, slots=True)
+class DuplicateMessages:
+    """Every message of ``kinds`` stamped in ``[start_s, end_s)`` is delivered twice in a row
+    (a publisher started twice, a bag merged with itself).
+
+    Attributes
+    ----------
+    start_s, end_s : float
+        The stretch, seconds after ``t0_ns``.
+    kinds : tuple of type
+        Record types repeated (empty: every record).
+    """
+
+    start_s: float
+    end_s: float
+    kinds: tuple[type[Message], ...] = ()
+
+    def apply(self, stream: Stream, t0_ns: int) -> Iterator[tuple[str, Message]]:
+        lo, hi = t0_ns + round(self.start_s * S_NS), t0_ns + round(self.end_s * S_NS)
+        logged = False
+        for topic, msg in stream:
+            yield topic, msg
+            if lo <= msg.stamp_ns < hi and _matches(msg, self.kinds):
+                if not logged:
+                    logger.info("fault: %s", self.describe())
+                    logged = True
+                yield topic, msg
+
+    def describe(self) -> str:
+        return f"{_kind_names(self.kinds)} sent twice from {self.start_s:g} s to {self.end_s:g} s"
+
+
+@dataclass(frozen=True, slots=True)
+class ClockJump:
+    """From ``at_s`` on, messages of ``kinds`` are stamped ``back_s`` earlier: their clock
+    jumped back once and runs on from the jumped value (a restarted clock). Delivery order is
+    unchanged (the stream's order is arrival order).
+
+    Attributes
+    ----------
+    at_s : float
+        The jump, seconds after ``t0_ns`` (by the original stamps).
+    back_s : float
+        How far back, s (> 0).
+    kinds : tuple of type
+        Record types on the jumping clock (empty: every record).
+
+    Raises
+    ------
+    ValueError
+        If ``back_s`` is not positive.
+    """
+
+    at_s: float
+    back_s: float
+    kinds: tuple[type[Message], ...] = ()
+
+    def __post_init__(self) -> None:
+        if not self.back_s > 0:
+            raise ValueError(f"ClockJump.back_s: must be > 0, got {self.back_s}")
+
+    def apply(self, stream: Stream, t0_ns: int) -> Iterator[tuple[str, Message]]:
+        at, back = t0_ns + round(self.at_s * S_NS), round(self.back_s * S_NS)
+        logged = False
+        for topic, msg in stream:
+            if msg.stamp_ns >= at and _matches(msg, self.kinds):
+                if not logged:
+                    logger.info("fault: %s", self.describe())
+                    logged = True
+                msg = dataclasses.replace(msg, stamp_ns=max(msg.stamp_ns - back, 0))
+            yield topic, msg
+
+    def describe(self) -> str:
+        return f"{_kind_names(self.kinds)} clock jumps {self.back_s:g} s back at {self.at_s:g} s"
+
+
+def apply_faults(
+    stream: Stream, faults: Sequence[StreamFault], t0_ns: int
+) -> Iterator[tuple[str, Message]]:
+    """``stream`` with each of ``faults`` applied, in order (lazily: nothing is buffered).
+
+    Parameters
+    ----------
+    stream : iterable of (str, Message)
+        ``(topic, record)`` pairs in arrival order.
+    faults : sequence of StreamFault
+    t0_ns : int
+        Origin of the faults' times, ns (the stream's first stamp).
+    """
+    out: Iterable[tuple[str, Message]] = stream
+    for fault in faults:
+        out = fault.apply(out, t0_ns)
+    return iter(out)
