@@ -9,6 +9,9 @@ topics are named by :class:`NodeTopics`:
   sample is the ``odom -> base`` edge of a bounded :class:`~tagloc.frames.TransformBuffer`, a
   prediction of the filter, a step of the supervisor, and one :class:`~tagloc.localize.outputs.
   Estimate` (and a status message when one is due).
+- a clock that jumps back (odometry stamped more than ``supervisor.clock_jump_s`` before the
+  last sample): the node starts over, as ROS tf does (buffer, estimate, waiting frames dropped;
+  the ladder falls to odometry only with the reason); smaller steps back are counted skips.
 - camera frames: ``TagDetectionsMsg`` (``detections``) or ``ImageMsg`` (``image``, run through
   the configured detector): held until the odometry covers their stamp, then turned into fixes
   (:class:`~tagloc.localize.fiducial.FiducialFixSource`) applied at their own stamp.
@@ -66,6 +69,8 @@ _NAN6 = np.full((6, 6), np.nan)
 _NAN6.flags.writeable = False
 #: Frame stamps remembered to refuse duplicates (a bounded set of the newest).
 _RECENT_FRAMES = 4096
+#: Camera frames that may wait for odometry to cover their stamp (30 s at 30 Hz).
+_MAX_PENDING = 900
 MARKERS = "markers"
 _FINAL = {EventKind.ACCEPTED, EventKind.INITIALIZED, EventKind.REINITIALIZED_KIDNAP}
 
@@ -150,6 +155,7 @@ class LocalizerNode:
         self._pending: list[tuple[int, int, _Frame]] = []  # heap by stamp
         self._seq = 0
         self._recent_frames: OrderedDict[int, None] = OrderedDict()
+        self._statics: list[tuple[str, str, SE3]] = []
         self._last_odom: int | None = None
         self._cov_last: np.ndarray | None = None
         self._cov_revision, self._cov_stamp = -1, 0
@@ -164,7 +170,9 @@ class LocalizerNode:
         self._fix_ns: int | None = None  # last accepted fix
         self._odometer_m, self._fix_odometer_m = 0.0, 0.0
         self._last_T: SE3 | None = None
-        self.counts: Counter[str] = Counter()
+        self._tick_ns = -(2**62)
+        self._jump_ns = round(cfg.supervisor.clock_jump_s * S_NS)
+        self.clock_jumps = 0
 
     # ----- input -----------------------------------------------------------------------------
     def feed(self, topic: str, msg: Message) -> None:
@@ -186,6 +194,7 @@ class LocalizerNode:
                 self._camera = from_camera_info(msg.info, f"{topic} CameraInfo")
         elif isinstance(msg, TransformMsg) and msg.static:
             self.buffer.set_static(msg.parent, msg.child, msg.T_parent_child)
+            self._statics.append((msg.parent, msg.child, msg.T_parent_child))
         elif isinstance(msg, GroundTruthMsg) and topic == t.truth:
             self._emit(msg)
 
@@ -217,8 +226,13 @@ class LocalizerNode:
         if not (np.isfinite(T.translation).all() and np.isfinite(T.as_quat()).all()):
             return self._skip("odom_non_finite", f"odometry at {stamp} ns")
         if self._last_odom is not None and stamp <= self._last_odom:
-            reason = "odom_duplicate_stamp" if stamp == self._last_odom else "odom_stamp_backwards"
-            return self._skip(reason, f"odometry: {stamp} ns after {self._last_odom} ns")
+            if self._last_odom - stamp > self._jump_ns:
+                self._clock_jump(stamp)
+            else:
+                reason = (
+                    "odom_duplicate_stamp" if stamp == self._last_odom else "odom_stamp_backwards"
+                )
+                return self._skip(reason, f"odometry: {stamp} ns after {self._last_odom} ns")
         self._last_odom = stamp
         if self._last_T is not None:
             self._odometer_m += float(np.linalg.norm(T.translation - self._last_T.translation))
@@ -254,10 +268,18 @@ class LocalizerNode:
         parent, child = self.frames_cfg.published_edge
         self._emit(Estimate(stamp, T_odom_base, T_map_odom, cov, flt.initialized, publish,
                             parent, child, estimate))  # fmt: skip
-        state = self._state(stamp, cov)
-        move = self.supervisor.step(stamp, state)
+        self._tick(stamp)
+
+    def _tick(self, stamp: int, reason: str = "") -> None:
+        """Step the supervisor (and publish the status when due) at ``stamp``: at every odometry
+        sample and every camera frame, so a silent input is noticed while others still arrive.
+        Older stamps than the last tick are not stepped."""
+        if stamp < self._tick_ns:
+            return
+        self._tick_ns = stamp
+        state = self._state(stamp, self._cov_last if self.filter.initialized else None)
+        move = self.supervisor.step(stamp, state, reason)
         if move is not None:
-            self.counts["ladder"] += 1
             self._emit(move)
         if self.supervisor.status_due(stamp):
             self._emit(self.supervisor.status(stamp, state))
@@ -272,9 +294,36 @@ class LocalizerNode:
             syaw = math.degrees(math.sqrt(max(float(cov[5, 5]), 0.0)))
         return EstimatorState(flt.initialized, flt.reacquiring, since_s, since_m, sxy, syaw)
 
+    def _clock_jump(self, stamp: int) -> None:
+        """Odometry stamped far before the last one: the clock jumped back (a restarted driver, a
+        bag played in a loop). Like ROS tf, start over: the buffer, the estimate and the frames
+        waiting are dropped, held records handed on, and the ladder falls to odometry only."""
+        assert self._last_odom is not None
+        back_s = (self._last_odom - stamp) / S_NS
+        logger.warning("clock jumped back %.3f s (odometry at %d ns): starting over", back_s, stamp)
+        self.clock_jumps += 1
+        self.skipped["frame_before_clock_jump"] += len(self._pending)
+        self._pending.clear()
+        self._recent_frames.clear()
+        self._held.release(None)
+        self.buffer = TransformBuffer(window_ns=30 * S_NS)
+        for static in self._statics:
+            self.buffer.set_static(*static)
+        self.filter = MapOdomFilter.from_config(self.config, self.buffer)
+        self.filter.events.listeners.append(self._emit)
+        self._source = None
+        self._last_odom = self._last_T = self._fix_ns = self._cov_last = None
+        self._cov_revision, self._next_publish, self._tick_ns = -1, 0, -(2**62)
+        self.supervisor.clock_jumped(stamp)
+        self._tick(stamp, f"clock jumped back {back_s:.3f} s: estimate restarted")
+
     # ----- camera frames ---------------------------------------------------------------------
     def _queue(self, frame: _Frame) -> None:
         self.supervisor.on_input("camera", frame.stamp_ns)
+        self._tick(frame.stamp_ns)
+        if len(self._pending) >= _MAX_PENDING:  # no odometry reaches them: drop the oldest
+            heapq.heappop(self._pending)
+            self._skip("frame_without_odometry", f"over {_MAX_PENDING} frames wait for odometry")
         if frame.stamp_ns in self._recent_frames:
             return self._skip("frame_duplicate_stamp", f"camera frame at {frame.stamp_ns} ns")
         self._recent_frames[frame.stamp_ns] = None

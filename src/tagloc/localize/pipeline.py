@@ -14,6 +14,7 @@ from typing import Any
 from tagloc.camera import CameraModel
 from tagloc.geometry import SE3
 from tagloc.localize.config import LocalizerConfig
+from tagloc.localize.filter import MapOdomFilter
 from tagloc.localize.fix import LocalizeError
 from tagloc.localize.node import FrameTruth, LocalizerNode, NodeTopics
 from tagloc.localize.outputs import OutputSink, RunRecorder
@@ -50,9 +51,14 @@ class LocalizationPipeline:
             tag_map, config, [self.recorder, *sinks], camera=camera, T_base_cam=T_base_cam,
             topics=topics, detector=detector, frame_truth=frame_truth,
         )  # fmt: skip
-        self.config, self.topics, self.filter = self.node.config, self.node.topics, self.node.filter
+        self.config, self.topics = self.node.config, self.node.topics
         self.name = name
         self._wall_s = 0.0
+
+    @property
+    def filter(self) -> MapOdomFilter:
+        """The node's filter (a new one after a clock jump)."""
+        return self.node.filter
 
     @property
     def skipped(self) -> dict[str, int]:

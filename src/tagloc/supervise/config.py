@@ -63,3 +63,6 @@ class SupervisorConfig(StrictModel):
     odometry: HealthConfig = HealthConfig(timeout_s=0.5, expected_rate_hz=100.0)
     camera: HealthConfig = HealthConfig(timeout_s=1.0, expected_rate_hz=30.0)
     ladder: LadderConfig = LadderConfig()
+    #: Odometry stamped more than this (s) before the previous sample is a clock jumped back:
+    #: the node starts over (smaller steps back are skipped and counted).
+    clock_jump_s: float = Field(1.0, gt=0, le=3600)

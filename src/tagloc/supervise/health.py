@@ -68,6 +68,10 @@ class Liveness:
                 self._dt_s += _EMA * (dt / S_NS - self._dt_s)
         self.last_ns = stamp_ns
 
+    def restart(self) -> None:
+        """Forget the last arrival (the clock jumped back); counts are kept."""
+        self.last_ns = None
+
     def alive(self, now_ns: int) -> bool:
         """Whether a message arrived within the timeout before ``now_ns``."""
         return self.last_ns is not None and now_ns - self.last_ns <= self.timeout_ns

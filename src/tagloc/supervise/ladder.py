@@ -123,6 +123,11 @@ class Ladder:
         self.transitions += 1
         return move
 
+    def restart(self, stamp_ns: int) -> None:
+        """The clock jumped back to ``stamp_ns``: time is counted from there on."""
+        self._clock_ns = stamp_ns
+        self._since_ns = stamp_ns
+
     def seconds_at_levels(self) -> dict[str, float]:
         """Stream time spent at each level so far, s (by level name)."""
         return {level.label: ns / S_NS for level, ns in self.time_ns.items()}

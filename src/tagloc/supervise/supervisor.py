@@ -154,8 +154,22 @@ class Supervisor:
             monitor.add(accepted, nis_per_dof, reproj_px)
 
     # ----- per odometry sample ---------------------------------------------------------------
-    def step(self, stamp_ns: int, estimator: EstimatorState) -> LadderTransition | None:
-        """Judge every level at ``stamp_ns``; return the ladder's move, if any."""
+    def clock_jumped(self, stamp_ns: int) -> None:
+        """The stream's clock jumped back to ``stamp_ns``: forget arrival times and quality (the
+        ladder keeps its level and totals; the next :meth:`step` judges afresh)."""
+        for live in self._inputs.values():
+            live.restart()
+        for q in self._quality.values():
+            q.clear()
+        self._was_alive.clear()
+        self._next_status = None
+        self.ladder.restart(stamp_ns)
+
+    def step(
+        self, stamp_ns: int, estimator: EstimatorState, reason: str = ""
+    ) -> LadderTransition | None:
+        """Judge every level at ``stamp_ns``; return the ladder's move, if any. ``reason``: an
+        event that makes every level unavailable now (a hard reason, e.g. a clock jump)."""
         for name, live in self._inputs.items():  # a dead input's old quality says nothing
             alive = live.alive(stamp_ns)
             if self._was_alive.get(name, False) and not alive:
@@ -164,6 +178,10 @@ class Supervisor:
                         self._quality[s.name].clear()
             self._was_alive[name] = alive
         unmet, hard = self._unmet(stamp_ns, estimator)
+        if reason:
+            for table in (unmet, hard):
+                for level in table:
+                    table[level] = [reason, *table[level]]
         return self.ladder.step(stamp_ns, unmet, hard)
 
     def status_due(self, stamp_ns: int) -> bool:
