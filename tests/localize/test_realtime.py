@@ -8,6 +8,9 @@ detectors saw; the simulator's ground truth and the offline :class:`Localization
 from __future__ import annotations
 
 import math
+import os
+import sys
+import threading
 import time
 from collections.abc import Iterator
 
@@ -19,8 +22,9 @@ from tagloc.geometry import SE3, SO3
 from tagloc.localize.node import LocalizerNode
 from tagloc.localize.outputs import Estimate, NodeOutput, RunRecorder
 from tagloc.localize.pipeline import LocalizationPipeline
-from tagloc.localize.realtime import DropOldestQueue, run_realtime
+from tagloc.localize.realtime import run_realtime
 from tagloc.localize.realtime_stats import LatencyReservoir
+from tagloc.localize.realtime_worker import DropOldestQueue, lower_thread_priority
 from tagloc.localize.run import LocalizationRun
 from tagloc.messages import ImageMsg, Message, OdometryMsg, TagDetectionsMsg
 from tagloc.sim.scenarios import ScenarioSource, build_scenario, calibrated_config, scenario_config
@@ -110,6 +114,24 @@ def test_drop_oldest_queue_keeps_the_newest_and_drains_after_close() -> None:
         DropOldestQueue(0)
 
 
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="per-thread nice is Linux's")
+def test_worker_priority_is_lowered_for_its_thread_only() -> None:
+    main_before = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+    seen: list[int] = []
+
+    def worker() -> None:
+        tid = threading.get_native_id()
+        before = os.getpriority(os.PRIO_PROCESS, tid)
+        lower_thread_priority(3)
+        seen.append(os.getpriority(os.PRIO_PROCESS, tid) - before)
+
+    thread = threading.Thread(target=worker)
+    thread.start()
+    thread.join()
+    assert seen == [min(3, 19 - main_before)]
+    assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == main_before
+
+
 def test_latency_reservoir_bounded_with_exact_count_and_max() -> None:
     reservoir = LatencyReservoir(capacity=100, seed=0)
     for i in range(10_000):
@@ -196,6 +218,7 @@ def test_simulated_stream_at_speed_20_matches_the_offline_pipeline(
     assert stats.detections_in == len(source.frames) and stats.frames_in == 0
     assert stats.stream_s == pytest.approx(20.0, abs=0.05)
     assert stats.image_to_correction.n > 0.9 * len(source.frames)
+    assert 0 < stats.odom_frame_to_estimate.n <= stats.image_to_correction.n
     assert np.array_equal(realtime.stamps_ns, offline.stamps_ns)
     assert _ate(realtime) <= 1.1 * _ate(offline)
     assert _ate(realtime) < 0.1

@@ -8,8 +8,9 @@ robot would see it:
    (``t0``: the first record's stamp); ``speed=None`` or ``inf`` feeds as fast as possible.
 2. **Detection off the main thread.** An ``ImageMsg`` on the node's image topic goes to a
    bounded queue (``queue_size``); when it is full the *oldest* waiting frame is dropped and
-   counted (a stale frame is worth less than a fresh one). One worker thread runs the detector
-   (the node's configured backend unless given) and hands back the frame's tags; the main
+   counted (a stale frame is worth less than a fresh one). One worker thread, at a lower
+   priority (``worker_nice``), runs the detector (the node's configured backend unless given)
+   and hands back the frame's tags (:mod:`tagloc.localize.realtime_worker`); the main
    thread feeds them to the node as a ``TagDetectionsMsg`` (same stamp and ``frame_id``) on
    the node's detections topic. A detector that raises loses that frame: logged, counted.
    ``TagDetectionsMsg`` records of the source go straight to the node.
@@ -29,111 +30,26 @@ import math
 import queue
 import threading
 import time
-from collections import deque
 from collections.abc import Iterable
-from dataclasses import dataclass
-from typing import Generic, TypeVar
 
 from tagloc.localize.node import LocalizerNode
 from tagloc.localize.outputs import Estimate, NodeOutput
 from tagloc.localize.realtime_stats import LatencyReservoir, RealtimeStats
+from tagloc.localize.realtime_worker import (
+    DetectionJob,
+    DetectionResult,
+    DropOldestQueue,
+    detect_loop,
+)
 from tagloc.messages import ImageMsg, Message, TagDetectionsMsg
-from tagloc.tags import TagDetection, TagDetector, make_detector
+from tagloc.tags import TagDetector, make_detector
 
-__all__ = ["DropOldestQueue", "RealtimeStats", "run_realtime"]
+__all__ = ["RealtimeStats", "run_realtime"]
 
 logger = logging.getLogger(__name__)
 S_NS = 1_000_000_000
 #: Frames awaiting their correction at most (older ones are forgotten unmeasured).
 _MAX_WAITING_FRAMES = 4096
-T = TypeVar("T")
-
-
-class DropOldestQueue(Generic[T]):
-    """A bounded FIFO between threads whose :meth:`put` never blocks: when full, the oldest
-    item is dropped and returned.
-
-    Parameters
-    ----------
-    maxsize : int
-        Items waiting at most (>= 1).
-    """
-
-    def __init__(self, maxsize: int) -> None:
-        if maxsize < 1:
-            raise ValueError(f"queue_size: must be >= 1, got {maxsize}")
-        self.maxsize = maxsize
-        self._items: deque[T] = deque()
-        self._cond = threading.Condition()
-        self._closed = False
-
-    def put(self, item: T) -> T | None:
-        """Append ``item``; return the item dropped to make room (None if there was room).
-
-        Raises
-        ------
-        RuntimeError
-            If the queue is closed.
-        """
-        with self._cond:
-            if self._closed:
-                raise RuntimeError("put on a closed DropOldestQueue")
-            dropped = self._items.popleft() if len(self._items) >= self.maxsize else None
-            self._items.append(item)
-            self._cond.notify()
-            return dropped
-
-    def get(self) -> T | None:
-        """The oldest item, waiting for one; None once the queue is closed and empty."""
-        with self._cond:
-            while not self._items and not self._closed:
-                self._cond.wait()
-            return self._items.popleft() if self._items else None
-
-    def close(self, *, discard: bool = False) -> None:
-        """No more puts; :meth:`get` returns what is left (nothing with ``discard``), then
-        None."""
-        with self._cond:
-            self._closed = True
-            if discard:
-                self._items.clear()
-            self._cond.notify_all()
-
-    def __len__(self) -> int:
-        with self._cond:
-            return len(self._items)
-
-
-@dataclass(frozen=True, slots=True)
-class _Job:
-    msg: ImageMsg
-    due_s: float  # wall time the frame was due, s (perf_counter)
-
-
-@dataclass(frozen=True, slots=True)
-class _Result:
-    job: _Job
-    detections: tuple[TagDetection, ...] | None  # None: the detector raised
-
-
-def _detect_loop(
-    detector: TagDetector, inbox: DropOldestQueue[_Job], outbox: queue.SimpleQueue[_Result]
-) -> None:
-    """The worker thread: detect each frame of ``inbox`` until it is closed and empty."""
-    errors = 0
-    while (job := inbox.get()) is not None:
-        try:
-            detections: tuple[TagDetection, ...] | None = tuple(detector.detect(job.msg.image))
-        except Exception:  # one frame's failure must not stop detection
-            errors += 1
-            if errors == 1:
-                logger.warning("detector raised on the frame at %d ns; further errors are "
-                               "counted", job.msg.stamp_ns, exc_info=True)  # fmt: skip
-            else:
-                logger.debug("detector raised on the frame at %d ns", job.msg.stamp_ns,
-                             exc_info=True)  # fmt: skip
-            detections = None
-        outbox.put(_Result(job, detections))
 
 
 class _TimingSink:
@@ -142,7 +58,8 @@ class _TimingSink:
     def __init__(self) -> None:
         self.odom = LatencyReservoir(seed=1)
         self.odom_due = LatencyReservoir(seed=2)
-        self.correction = LatencyReservoir(seed=3)
+        self.odom_frame = LatencyReservoir(seed=3)
+        self.correction = LatencyReservoir(seed=4)
         self._expect: tuple[int, float, float] | None = None  # stamp, fed, due (s)
         self._waiting: list[tuple[int, int, float]] = []  # heap: (stamp, seq, due)
         self._seq = 0
@@ -163,19 +80,23 @@ class _TimingSink:
         if not isinstance(output, Estimate):
             return
         now = time.perf_counter()
+        frames = 0  # decided in this feed, before this estimate
+        while self._waiting and self._waiting[0][0] <= output.stamp_ns:
+            self.correction.add(now - heapq.heappop(self._waiting)[2])
+            frames += 1
         if self._expect is not None and self._expect[0] == output.stamp_ns:
             _, fed_s, due_s = self._expect
             self.odom.add(now - fed_s)
             self.odom_due.add(now - due_s)
+            if frames:
+                self.odom_frame.add(now - fed_s)
             self._expect = None
-        while self._waiting and self._waiting[0][0] <= output.stamp_ns:
-            self.correction.add(now - heapq.heappop(self._waiting)[2])
 
 
 class _Runner:
     """State of one :func:`run_realtime` call (main thread only)."""
 
-    def __init__(self, node: LocalizerNode, outbox: queue.SimpleQueue[_Result]) -> None:
+    def __init__(self, node: LocalizerNode, outbox: queue.SimpleQueue[DetectionResult]) -> None:
         self.node, self.outbox = node, outbox
         self.timing = _TimingSink()
         self.frames_in = self.dropped = self.errors = self.detections_in = 0
@@ -184,7 +105,7 @@ class _Runner:
         self.timing.feeding(msg.stamp_ns, time.perf_counter(), due_s)
         self.node.feed(topic, msg)
 
-    def deliver(self, result: _Result) -> None:
+    def deliver(self, result: DetectionResult) -> None:
         """A detected frame to the node (or an error counted)."""
         if result.detections is None:
             self.errors += 1
@@ -214,7 +135,7 @@ class _Runner:
 
 def run_realtime(
     node: LocalizerNode, source: Iterable[tuple[str, Message]], *, speed: float | None = 1.0,
-    queue_size: int = 2, detector: TagDetector | None = None,
+    queue_size: int = 2, detector: TagDetector | None = None, worker_nice: int = 10,
 ) -> RealtimeStats:  # fmt: skip
     """Run ``node`` on ``source`` paced by the wall clock, detecting images on a worker thread.
 
@@ -231,6 +152,10 @@ def run_realtime(
     detector : TagDetector, optional
         Used by the worker only (default: ``make_detector(config.tags.backend,
         config.tags.family)`` of the node's configuration).
+    worker_nice : int
+        Added to the worker thread's nice value (Linux; 0: unchanged), so that detection
+        yields a shared core to the main thread's odometry (on one loaded core it cut the p99
+        of odometry due -> estimate by 3-9x, ``benchmarks/bench_realtime.py``).
 
     Returns
     -------
@@ -247,12 +172,14 @@ def run_realtime(
     rate = math.inf if speed is None else float(speed)
     if not rate > 0:
         raise ValueError(f"speed: must be > 0 (or None), got {speed}")
-    inbox: DropOldestQueue[_Job] = DropOldestQueue(queue_size)
-    outbox: queue.SimpleQueue[_Result] = queue.SimpleQueue()
+    inbox: DropOldestQueue[DetectionJob] = DropOldestQueue(queue_size)
+    outbox: queue.SimpleQueue[DetectionResult] = queue.SimpleQueue()
     tags = node.config.tags
     detector = detector if detector is not None else make_detector(tags.backend, tags.family)
-    worker = threading.Thread(target=_detect_loop, args=(detector, inbox, outbox),
-                              name="tagloc-detect", daemon=True)  # fmt: skip
+    worker = threading.Thread(
+        target=detect_loop, args=(detector, inbox, outbox, worker_nice), name="tagloc-detect",
+        daemon=True,
+    )  # fmt: skip
     run = _Runner(node, outbox)
     node.sinks.append(run.timing)
     t0: int | None = None
@@ -271,7 +198,7 @@ def run_realtime(
             # 2. images to the worker (never waiting for it), everything else to the node
             if isinstance(msg, ImageMsg) and topic == node.topics.image:
                 run.frames_in += 1
-                if inbox.put(_Job(msg, due_s)) is not None:
+                if inbox.put(DetectionJob(msg, due_s)) is not None:
                     run.dropped += 1
                     if run.dropped == 1:
                         logger.info("detector behind: dropped the oldest waiting frame "
@@ -297,6 +224,7 @@ def run_realtime(
         frames_in=run.frames_in, frames_dropped=run.dropped, detector_errors=run.errors,
         detections_in=run.detections_in, odom_to_estimate=timing.odom.summary(),
         odom_due_to_estimate=timing.odom_due.summary(),
+        odom_frame_to_estimate=timing.odom_frame.summary(),
         image_to_correction=timing.correction.summary(), wall_s=time.perf_counter() - start,
         stream_s=0.0 if t0 is None else (stamp_last - t0) / S_NS, speed=rate,
     )  # fmt: skip

@@ -109,6 +109,10 @@ class RealtimeStats:
     odom_due_to_estimate : LatencySummary
         The same from when the sample was due by the pacing (adds the wait for the main thread
         when it was busy, e.g. with the previous message).
+    odom_frame_to_estimate : LatencySummary
+        ``odom_to_estimate`` of the samples whose feed also decided camera frames (the node
+        turns a frame into fixes and filter updates at the first odometry sample at or after
+        its stamp, before that sample's estimate): the costly ones.
     image_to_correction : LatencySummary
         Wall time from when a frame was due to the first ``Estimate`` published after the
         frame's detections were fed to the node whose stamp is at or after the frame's (the
@@ -128,6 +132,7 @@ class RealtimeStats:
     detections_in: int
     odom_to_estimate: LatencySummary
     odom_due_to_estimate: LatencySummary
+    odom_frame_to_estimate: LatencySummary
     image_to_correction: LatencySummary
     wall_s: float
     stream_s: float
@@ -154,5 +159,6 @@ class RealtimeStats:
             f"{self.detections_in} pre-detected",
             f"odometry -> estimate: {self.odom_to_estimate.text()}",
             f"odometry due -> estimate: {self.odom_due_to_estimate.text()}",
+            f"odometry with a frame -> estimate: {self.odom_frame_to_estimate.text()}",
             f"image due -> correction: {self.image_to_correction.text()}",
         ]
