@@ -219,6 +219,8 @@ def test_simulated_stream_at_speed_20_matches_the_offline_pipeline(
     assert stats.stream_s == pytest.approx(20.0, abs=0.05)
     assert stats.image_to_correction.n > 0.9 * len(source.frames)
     assert 0 < stats.odom_frame_to_estimate.n <= stats.image_to_correction.n
+    n_odom = stats.odom_frame_to_estimate.n + stats.odom_only_to_estimate.n
+    assert n_odom == stats.odom_to_estimate.n == len(realtime.stamps_ns)
     assert np.array_equal(realtime.stamps_ns, offline.stamps_ns)
     assert _ate(realtime) <= 1.1 * _ate(offline)
     assert _ate(realtime) < 0.1

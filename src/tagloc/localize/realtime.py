@@ -59,7 +59,8 @@ class _TimingSink:
         self.odom = LatencyReservoir(seed=1)
         self.odom_due = LatencyReservoir(seed=2)
         self.odom_frame = LatencyReservoir(seed=3)
-        self.correction = LatencyReservoir(seed=4)
+        self.odom_only = LatencyReservoir(seed=4)
+        self.correction = LatencyReservoir(seed=5)
         self._expect: tuple[int, float, float] | None = None  # stamp, fed, due (s)
         self._waiting: list[tuple[int, int, float]] = []  # heap: (stamp, seq, due)
         self._seq = 0
@@ -88,8 +89,7 @@ class _TimingSink:
             _, fed_s, due_s = self._expect
             self.odom.add(now - fed_s)
             self.odom_due.add(now - due_s)
-            if frames:
-                self.odom_frame.add(now - fed_s)
+            (self.odom_frame if frames else self.odom_only).add(now - fed_s)
             self._expect = None
 
 
@@ -225,6 +225,7 @@ def run_realtime(
         detections_in=run.detections_in, odom_to_estimate=timing.odom.summary(),
         odom_due_to_estimate=timing.odom_due.summary(),
         odom_frame_to_estimate=timing.odom_frame.summary(),
+        odom_only_to_estimate=timing.odom_only.summary(),
         image_to_correction=timing.correction.summary(), wall_s=time.perf_counter() - start,
         stream_s=0.0 if t0 is None else (stamp_last - t0) / S_NS, speed=rate,
     )  # fmt: skip

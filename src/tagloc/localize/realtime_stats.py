@@ -105,7 +105,8 @@ class RealtimeStats:
     detections_in : int
         ``TagDetectionsMsg`` frames of the source passed straight to the node.
     odom_to_estimate : LatencySummary
-        Wall time from feeding an odometry sample to the node to its ``Estimate`` at a sink.
+        Wall time from feeding an odometry sample to the node to its ``Estimate`` having been
+        handed to every sink (the run's timing sink comes after the node's own).
     odom_due_to_estimate : LatencySummary
         The same from when the sample was due by the pacing (adds the wait for the main thread
         when it was busy, e.g. with the previous message).
@@ -113,6 +114,8 @@ class RealtimeStats:
         ``odom_to_estimate`` of the samples whose feed also decided camera frames (the node
         turns a frame into fixes and filter updates at the first odometry sample at or after
         its stamp, before that sample's estimate): the costly ones.
+    odom_only_to_estimate : LatencySummary
+        ``odom_to_estimate`` of the other samples (prediction, estimate, supervisor only).
     image_to_correction : LatencySummary
         Wall time from when a frame was due to the first ``Estimate`` published after the
         frame's detections were fed to the node whose stamp is at or after the frame's (the
@@ -133,6 +136,7 @@ class RealtimeStats:
     odom_to_estimate: LatencySummary
     odom_due_to_estimate: LatencySummary
     odom_frame_to_estimate: LatencySummary
+    odom_only_to_estimate: LatencySummary
     image_to_correction: LatencySummary
     wall_s: float
     stream_s: float
@@ -160,5 +164,6 @@ class RealtimeStats:
             f"odometry -> estimate: {self.odom_to_estimate.text()}",
             f"odometry due -> estimate: {self.odom_due_to_estimate.text()}",
             f"odometry with a frame -> estimate: {self.odom_frame_to_estimate.text()}",
+            f"odometry without a frame -> estimate: {self.odom_only_to_estimate.text()}",
             f"image due -> correction: {self.image_to_correction.text()}",
         ]
