@@ -48,7 +48,7 @@ __all__ = ["RealtimeStats", "run_realtime"]
 
 logger = logging.getLogger(__name__)
 S_NS = 1_000_000_000
-#: Frames awaiting their correction at most (older ones are forgotten unmeasured).
+#: Frames awaiting their correction at most (more go unmeasured).
 _MAX_WAITING_FRAMES = 4096
 
 
@@ -71,11 +71,10 @@ class _TimingSink:
 
     def frame_fed(self, stamp_ns: int, due_s: float) -> None:
         """A frame's detections were fed: its correction is the next estimate at or after it."""
+        if len(self._waiting) >= _MAX_WAITING_FRAMES:
+            return  # no odometry for a long while: this frame goes unmeasured
         self._seq += 1
         heapq.heappush(self._waiting, (stamp_ns, self._seq, due_s))
-        if len(self._waiting) > _MAX_WAITING_FRAMES:
-            self._waiting.remove(max(self._waiting))  # the newest stays measurable last
-            heapq.heapify(self._waiting)
 
     def write(self, output: NodeOutput) -> None:
         if not isinstance(output, Estimate):
