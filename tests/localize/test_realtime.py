@@ -175,6 +175,10 @@ def test_slow_detector_drops_oldest_frames_and_no_odometry_is_lost(
     assert stats.frames_dropped > 0
     assert stats.frames_dropped == n_frames - len(detector.seen)
     assert stats.drop_fraction == pytest.approx(stats.frames_dropped / n_frames)
+    summary = stats.to_dict()
+    assert summary["frames_dropped"] == stats.frames_dropped
+    assert summary["odom_to_estimate"]["n"] == len(odom_stamps)
+    assert f"{stats.frames_dropped} dropped" in "\n".join(stats.lines())
     assert detector.seen == sorted(set(detector.seen))  # FIFO among the kept frames
     assert detector.seen[-1] == n_frames - 1  # the newest frame is never the one dropped
     assert stats.detector_errors == 0
