@@ -80,12 +80,17 @@ def localize(
     if out.exists() and not out.is_dir():
         raise LocalizeError(f"--out: {out} exists and is not a directory")
     cfg = None if config is None else load_localizer_config(config)
+
     topics = (odom_topic, detections_topic, image_topic, camera_info_topic, truth_topic, tf_topic)
     if scenario is not None:
         wired = _scenario_node(scenario, seed, duration, cfg)
     else:
         assert bag is not None
         wired = _bag_node(bag, tags, cfg, cameras, topics)
+    if realtime:  # live order: publish each odometry sample before the frames it completes
+        node_cfg = wired.node.config
+        output = node_cfg.output.model_copy(update={"publish_first": True})
+        wired.node.config = node_cfg.model_copy(update={"output": output})
     written, lines = run_node(wired, out, bag=not no_bag, realtime=speed if realtime else None)
     console = Console()
     for line in lines:

@@ -68,7 +68,7 @@ S_NS = 1_000_000_000
 _NAN6 = np.full((6, 6), np.nan)
 _NAN6.flags.writeable = False
 #: Frame stamps remembered to refuse duplicates (a bounded set of the newest).
-_RECENT_FRAMES = 4096
+_RECENT_FRAMES = 1024
 #: Camera frames that may wait for odometry to cover their stamp (30 s at 30 Hz).
 _MAX_PENDING = 900
 MARKERS = "markers"
@@ -240,10 +240,14 @@ class LocalizerNode:
         f = self.frames_cfg
         self.buffer.set_transform(f.odom_frame, f.base_frame, stamp, T)
         self.supervisor.on_input("odometry", stamp)
+        if self.config.output.publish_first:
+            self.filter.predict(stamp)
+            self._estimate(stamp, T)
         while self._pending and self._pending[0][0] <= stamp:
             self._process(heapq.heappop(self._pending)[2])
-        self.filter.predict(stamp)
-        self._estimate(stamp, T)
+        if not self.config.output.publish_first:
+            self.filter.predict(stamp)
+            self._estimate(stamp, T)
         return None
 
     def _estimate(self, stamp: int, T_odom_base: SE3) -> None:
