@@ -144,3 +144,22 @@ def test_the_resolved_configuration_round_trips() -> None:
     cfg = LocalizerConfig.from_yaml_text("frames: {convention: dimos}\ngates: {gap_s: 7}\n", "a")
     again = LocalizerConfig.from_yaml_text(cfg.to_yaml_text(), "b")
     assert again == cfg and again.frames.publish == "odom_to_map" and again.gates.gap_s == 7
+
+
+def test_images_of_the_wrong_size_are_counted_skips(source: ScenarioSource) -> None:
+    from tagloc.messages import ImageMsg
+
+    class NeverCalled:
+        def detect(self, image: object) -> list[object]:
+            raise AssertionError("a mis-sized image must not reach the detector")
+
+    sink = ListSink()
+    camera = source.camera
+    node = LocalizerNode(
+        source.scenario.tag_map, scenario_config(), [sink], camera=camera,
+        detector=NeverCalled(),  # type: ignore[arg-type]
+    )  # fmt: skip
+    image = np.zeros((camera.height // 2, camera.width // 2), np.uint8)
+    for k in range(3):
+        node.feed("/camera/image", ImageMsg(k * S, "camera_optical", image, "mono8"))
+    assert node.skipped == {"image_size_mismatch": 3}

@@ -128,14 +128,25 @@ def run_node(
             for topic, msg in wired.stream:
                 node.feed(topic, msg)
             node.finish()
-        if sink.counts["odometry"] and not sink.counts["frames"]:
-            logger.warning("no camera frame reached the node: check the detections/image topic")
+        _check_frames(node, sink.counts["frames"])
     except BaseException:
         sink.abort()
         raise
     written, lines = sink.close(node.metadata())
     atomic_write_text(out / "localizer.yaml", node.config.to_yaml_text())
     return [*written, out / "localizer.yaml"], lines
+
+
+def _check_frames(node: LocalizerNode, n_frames: int) -> None:
+    """No camera frame localized from a stream that had frames: one line saying why."""
+    from tagloc.localize import LocalizeError
+
+    if n_frames:
+        return
+    skipped = {k: v for k, v in node.skipped.items() if not k.startswith("odom_")}
+    if skipped:
+        raise LocalizeError(f"no camera frame could be used (skipped: {skipped})")
+    logger.warning("no camera frame reached the node: check the detections/image topic")
 
 
 def _scenario_node(

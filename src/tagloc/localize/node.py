@@ -155,7 +155,7 @@ class LocalizerNode:
         self._pending: list[tuple[int, int, _Frame]] = []  # heap by stamp
         self._seq = 0
         self._recent_frames: OrderedDict[int, None] = OrderedDict()
-        self._statics: list[tuple[str, str, SE3]] = []
+        self._statics: dict[tuple[str, str], SE3] = {}
         self._last_odom: int | None = None
         self._cov_last: np.ndarray | None = None
         self._cov_revision, self._cov_stamp = -1, 0
@@ -194,7 +194,7 @@ class LocalizerNode:
                 self._camera = from_camera_info(msg.info, f"{topic} CameraInfo")
         elif isinstance(msg, TransformMsg) and msg.static:
             self.buffer.set_static(msg.parent, msg.child, msg.T_parent_child)
-            self._statics.append((msg.parent, msg.child, msg.T_parent_child))
+            self._statics[msg.parent, msg.child] = msg.T_parent_child
         elif isinstance(msg, GroundTruthMsg) and topic == t.truth:
             self._emit(msg)
 
@@ -311,8 +311,8 @@ class LocalizerNode:
         self._recent_frames.clear()
         self._held.release(None)
         self.buffer = TransformBuffer(window_ns=30 * S_NS)
-        for static in self._statics:
-            self.buffer.set_static(*static)
+        for (parent, child), T in self._statics.items():
+            self.buffer.set_static(parent, child, T)
         self.filter = MapOdomFilter.from_config(self.config, self.buffer)
         self.filter.events.listeners.append(self._emit)
         self._source = None
@@ -339,6 +339,14 @@ class LocalizerNode:
 
     def _detect(self, msg: ImageMsg) -> tuple[TagDetection, ...] | None:
         tags = self.config.tags
+        cam = self._camera
+        if cam is not None and msg.image.shape[:2] != (cam.height, cam.width):
+            h, w = msg.image.shape[:2]
+            self._skip(
+                "image_size_mismatch",
+                f"image at {msg.stamp_ns} ns is {w}x{h}, the camera model {cam.width}x{cam.height}",
+            )
+            return None
         try:
             if self._detector is None:
                 from tagloc.tags import make_detector
