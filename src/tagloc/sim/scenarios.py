@@ -63,6 +63,7 @@ __all__ = [
     "localize_scenario",
     "run_scenario",
     "tag_map_from_world",
+    "truncate_drive",
 ]
 
 S_NS = 1_000_000_000
@@ -229,7 +230,7 @@ def build_scenario(
         drive = _splice(drive, spec.kidnap_at_s, spec.kidnap_skip_s)
         kidnaps.append(drive.t0_ns + round(spec.kidnap_at_s * S_NS))
     if duration_s is not None:
-        drive = _truncate(drive, duration_s)
+        drive = truncate_drive(drive, duration_s)
     if true_world is not surveyed:
         drive = replace(drive, world=true_world)
     stamps = drive.camera_stamps_ns
@@ -278,7 +279,8 @@ def _splice(drive: Drive, kidnap_at_s: float, skip_s: float) -> SplicedDrive:
     )  # fmt: skip
 
 
-def _truncate(drive: Drive, duration_s: float) -> Drive:
+def truncate_drive(drive: Drive, duration_s: float) -> Drive:
+    """The first ``duration_s`` seconds of ``drive`` (odometry, truth and camera stamps)."""
     end = drive.t0_ns + round(duration_s * S_NS)
     n = int(np.searchsorted(drive.stamps_ns, end, side="right"))
     return replace(
