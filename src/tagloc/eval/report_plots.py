@@ -171,4 +171,5 @@ def ladder_png(ev: Evaluation) -> bytes:
     ax.set_yticks([1, 2, 3, 4], ["1 lidar", "2 markers carry", "3 markers alone", "4 odometry"])
     ax.set_xlabel("time (s)")
     ax.grid(alpha=0.3)
+    fig.subplots_adjust(left=0.17, bottom=0.25)
     return _png(fig)
