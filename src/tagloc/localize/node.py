@@ -30,7 +30,7 @@ import heapq
 import logging
 import math
 from collections import Counter, OrderedDict
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -108,6 +108,7 @@ class _Frame:
     stamp_ns: int
     frame_id: str
     detections: tuple[TagDetection, ...]
+    fixes: FrameFixes | None = None  # computed elsewhere (the real-time worker)
 
 
 class LocalizerNode:
@@ -173,6 +174,9 @@ class LocalizerNode:
         self._tick_ns = -(2**62)
         self._jump_ns = round(cfg.supervisor.clock_jump_s * S_NS)
         self.clock_jumps = 0
+        #: The correction published at the latest odometry sample (None uninitialized): read by
+        #: worker threads (an attribute assignment is atomic).
+        self.latest_T_map_odom: SE3 | None = None
 
     # ----- input -----------------------------------------------------------------------------
     def feed(self, topic: str, msg: Message) -> None:
@@ -197,6 +201,33 @@ class LocalizerNode:
             self._statics[msg.parent, msg.child] = msg.T_parent_child
         elif isinstance(msg, GroundTruthMsg) and topic == t.truth:
             self._emit(msg)
+
+    def feed_frame(
+        self, stamp_ns: int, frame_id: str, detections: tuple[TagDetection, ...],
+        fixes: FrameFixes,
+    ) -> None:  # fmt: skip
+        """A camera frame whose fixes were computed elsewhere (by :meth:`fixer`, on another
+        thread): queued like any frame, applied when the odometry covers its stamp."""
+        self._queue(_Frame(stamp_ns, frame_id, detections, fixes))
+
+    def fixer(
+        self, stamp_ns: int, frame_id: str
+    ) -> Callable[[int, tuple[TagDetection, ...]], FrameFixes] | None:
+        """A function that forms a frame's fixes without touching the node's state, for a worker
+        thread (None until the camera model and extrinsics are known). Its orientation prior is
+        the newest published correction when it runs (the frame may wait behind others: the
+        filter has moved on by then) composed with the odometry when the frame arrived."""
+        source = self._fix_source(_Frame(stamp_ns, frame_id, ()), quiet=True)
+        if source is None:
+            return None
+        T_odom_base = self._last_T  # the odometry now, about the frame's stamp
+
+        def fixes(stamp: int, detections: tuple[TagDetection, ...]) -> FrameFixes:
+            T_map_odom = self.latest_T_map_odom  # the newest correction when the worker runs
+            prior = None if T_map_odom is None or T_odom_base is None else T_map_odom @ T_odom_base
+            return source.frame_fixes(stamp, detections, prior, None)
+
+        return fixes
 
     def finish(self) -> None:
         """Process frames still waiting for odometry and hand on every held record.
@@ -266,6 +297,7 @@ class LocalizerNode:
             cov = self._cov_last
         else:
             T_map_odom = SE3.identity()
+        self.latest_T_map_odom = T_map_odom if flt.initialized else None
         publish = stamp >= self._next_publish
         if publish:
             self._next_publish = stamp + self._publish_ns
@@ -357,11 +389,12 @@ class LocalizerNode:
             self._skip("detector_error", f"frame at {msg.stamp_ns} ns: {exc!r}")
             return None
 
-    def _fix_source(self, frame: _Frame) -> FiducialFixSource | None:
+    def _fix_source(self, frame: _Frame, *, quiet: bool = False) -> FiducialFixSource | None:
         if self._source is not None:
             return self._source
         if self._camera is None:
-            self._skip("no_camera_info", f"frame at {frame.stamp_ns} ns before any CameraInfo")
+            if not quiet:
+                self._skip("no_camera_info", f"frame at {frame.stamp_ns} ns before CameraInfo")
             return None
         T_base_cam = self._T_base_cam
         if T_base_cam is None:
@@ -370,7 +403,8 @@ class LocalizerNode:
                     self.frames_cfg.base_frame, frame.frame_id, frame.stamp_ns
                 )
             except TransformLookupError as exc:
-                self._skip("no_extrinsics", str(exc))
+                if not quiet:
+                    self._skip("no_extrinsics", str(exc))
                 return None
         tags = self.config.tags
         fid = FiducialConfig(
@@ -397,12 +431,16 @@ class LocalizerNode:
         if flags is not None and len(flags) != len(frame.detections):
             flags = None
         prior = None
-        if self.filter.initialized:
+        if self.filter.initialized and frame.fixes is None:
             try:
                 prior = self.filter.T_map_base_at(frame.stamp_ns)
             except TransformLookupError:
                 prior = None
-        result = source.frame_fixes(frame.stamp_ns, frame.detections, prior, flags)
+        result = (
+            frame.fixes
+            if frame.fixes is not None
+            else source.frame_fixes(frame.stamp_ns, frame.detections, prior, flags)
+        )
         self._apply(frame.stamp_ns, result)
         nearest = truth.nearest_visible_m if truth is not None else _nearest(result)
         self._held.hold(CameraFrameRecord(frame.stamp_ns, nearest, len(frame.detections), 0))

@@ -12,7 +12,11 @@ robot would see it:
    priority (``worker_nice``), runs the detector (the node's configured backend unless given)
    and hands back the frame's tags (:mod:`tagloc.localize.realtime_worker`); the main
    thread feeds them to the node as a ``TagDetectionsMsg`` (same stamp and ``frame_id``) on
-   the node's detections topic. A detector that raises loses that frame: logged, counted.
+   the node's detections topic. Once the node can form fixes (camera model and extrinsics
+   known), the worker also computes each frame's fixes (PnP, covariance, gates, with the
+   node's latest estimate as the orientation prior: :meth:`LocalizerNode.fixer`), so the main
+   thread only applies them to the filter. A detector that raises loses that frame: logged,
+   counted.
    ``TagDetectionsMsg`` records of the source go straight to the node.
 3. **The node stays single-threaded.** Only the main thread calls ``node.feed``; it never waits
    for the worker while the source runs (odometry is never blocked by detection), only at the
@@ -110,8 +114,12 @@ class _Runner:
             self.errors += 1
             return
         image = result.job.msg
-        msg = TagDetectionsMsg(image.stamp_ns, image.frame_id, result.detections)
-        self.feed(self.node.topics.detections, msg, result.job.due_s)
+        if result.fixes is not None:  # computed on the worker: the node applies them
+            self.timing.feeding(image.stamp_ns, time.perf_counter(), result.job.due_s)
+            self.node.feed_frame(image.stamp_ns, image.frame_id, result.detections, result.fixes)
+        else:
+            msg = TagDetectionsMsg(image.stamp_ns, image.frame_id, result.detections)
+            self.feed(self.node.topics.detections, msg, result.job.due_s)
         self.timing.frame_fed(image.stamp_ns, result.job.due_s)
 
     def deliver_ready(self) -> None:
@@ -197,7 +205,8 @@ def run_realtime(
             # 2. images to the worker (never waiting for it), everything else to the node
             if isinstance(msg, ImageMsg) and topic == node.topics.image:
                 run.frames_in += 1
-                if inbox.put(DetectionJob(msg, due_s)) is not None:
+                fixer = node.fixer(msg.stamp_ns, msg.frame_id)
+                if inbox.put(DetectionJob(msg, due_s, fixer)) is not None:
                     run.dropped += 1
                     if run.dropped == 1:
                         logger.info("detector behind: dropped the oldest waiting frame "

@@ -15,9 +15,11 @@ import queue
 import sys
 import threading
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Generic, TypeVar
 
+from tagloc.localize.fiducial import FrameFixes
 from tagloc.messages import ImageMsg
 from tagloc.tags import TagDetection, TagDetector
 
@@ -88,20 +90,28 @@ class DropOldestQueue(Generic[T]):
             return len(self._items)
 
 
+#: ``fixer(stamp_ns, detections)``: the frame's fixes, computed on the worker (PnP, gates).
+Fixer = Callable[[int, tuple[TagDetection, ...]], FrameFixes]
+
+
 @dataclass(frozen=True, slots=True)
 class DetectionJob:
-    """A frame for the worker and the wall time (``time.perf_counter``, s) it was due."""
+    """A frame for the worker, the wall time (``time.perf_counter``, s) it was due, and the
+    node's fix computation when it is ready (None: the main thread computes the fixes)."""
 
     msg: ImageMsg
     due_s: float  # wall time the frame was due, s (perf_counter)
+    fixer: Fixer | None = None
 
 
 @dataclass(frozen=True, slots=True)
 class DetectionResult:
-    """A detected frame: its tags, or None when the detector raised on it."""
+    """A detected frame: its tags (None when the detector raised on it) and its fixes when the
+    worker computed them."""
 
     job: DetectionJob
     detections: tuple[TagDetection, ...] | None  # None: the detector raised
+    fixes: FrameFixes | None = None
 
 
 def lower_thread_priority(nice: int) -> None:
@@ -146,4 +156,11 @@ def detect_loop(
                 logger.debug("detector raised on the frame at %d ns", job.msg.stamp_ns,
                              exc_info=True)  # fmt: skip
             detections = None
-        outbox.put(DetectionResult(job, detections))
+        fixes = None
+        if detections is not None and job.fixer is not None:
+            try:  # PnP and the gates here too: the main thread only applies the fixes
+                fixes = job.fixer(job.msg.stamp_ns, detections)
+            except Exception:
+                logger.warning("fix computation raised on the frame at %d ns; the main thread "
+                               "retries it", job.msg.stamp_ns, exc_info=True)  # fmt: skip
+        outbox.put(DetectionResult(job, detections, fixes))
