@@ -60,25 +60,16 @@ class FramesConfig(StrictModel):
         return self.map_frame, self.odom_frame
 
 
-class GatesConfig(StrictModel):
-    """One set of gates for observations and fixes (module docstring)."""
+class GatesConfig(StrictModel, GateConfig):
+    """One set of gates for observations and fixes (module docstring).
 
-    #: RMS corner reprojection error of the chosen pose, px (pure noise of 0.5 px gives
-    #: < 0.93 px in 99.9 % of views; the rest is room for real-image corner bias). Checked on
-    #: every observation and again on every fix.
-    max_reproj_err_px: float = Field(2.0, gt=0)
-    #: Camera-to-tag range, m (observations and fixes).
-    max_range_m: float = Field(8.0, gt=0)
-    #: Angle between the tag normal and the ray to the camera, deg.
-    max_view_angle_deg: float = Field(75.0, gt=0, le=90)
-    #: Smallest AprilTag 3 decision margin (skipped for detections without one, e.g. ArUco).
-    min_decision_margin: float = Field(20.0, ge=0)
-    #: Most corrected bits of a decoded id.
-    max_hamming: int = Field(1, ge=0)
-    #: Evidence for the chosen IPPE branch, ``2 ln(p_chosen / p_other)`` (18.4: odds 10^4).
-    ambiguity_log_odds: float = Field(18.4, ge=0)
-    #: Largest prior chi-square of the chosen branch (16.3: 99.9 % of chi-square, 3 dof).
-    prior_gate_chi2: float = Field(16.3, gt=0)
+    The per-observation fields are the tag layer's :class:`~tagloc.tags.GateConfig` (inherited:
+    one definition, one default each): ``max_reproj_err_px`` (2.0 px; checked again on every
+    fix), ``max_range_m`` (8.0 m; also on fixes), ``max_view_angle_deg`` (75),
+    ``min_decision_margin`` (20), ``max_hamming`` (1), ``ambiguity_log_odds`` (18.4),
+    ``prior_gate_chi2`` (16.3).
+    """
+
     #: IPPE ambiguity ratio above which a fix is refused (None: no limit; the chi-square gate
     #: already refuses a flipped branch once the state is known).
     max_ambiguity_ratio: float | None = Field(None, gt=0)
@@ -96,12 +87,7 @@ class GatesConfig(StrictModel):
 
     def observation_gates(self) -> GateConfig:
         """The per-observation part, as the tag layer takes it."""
-        return GateConfig(
-            max_reproj_err_px=self.max_reproj_err_px, max_range_m=self.max_range_m,
-            max_view_angle_deg=self.max_view_angle_deg,
-            min_decision_margin=self.min_decision_margin, max_hamming=self.max_hamming,
-            ambiguity_log_odds=self.ambiguity_log_odds, prior_gate_chi2=self.prior_gate_chi2,
-        )  # fmt: skip
+        return GateConfig(**self.model_dump(include=set(GateConfig.model_fields)))
 
 
 class TagSensorConfig(StrictModel):
