@@ -20,21 +20,19 @@ camera_unplugged     no ``TagDetectionsMsg`` from 30 s to 50 s (tags in view bef
                      (20 s is a gap: ``gates.k_consistent`` consistent fixes first).
                      Measured: 3 -> 4 at 31.00 s, 4 -> 3 at 50.10 s (frames back at 50.03 s).
 odometry_stall       no ``OdometryMsg`` from 40 s to 42 s; camera frames continue. Expected:
-                     3 -> 4 (``odometry dead``) after ``supervisor.odometry.timeout_s``, back to
-                     3 when odometry returns; nothing skipped; the fused error after the stall
-                     that of the clean drive. Measured: nothing skipped, every frame of the stall
-                     used, error as clean from 45 s on; but no ladder move and no status message
-                     at all during the stall (the supervisor steps only at odometry samples).
+                     3 -> 4 (``odometry dead``) after ``supervisor.odometry.timeout_s`` (0.5 s;
+                     the supervisor also steps at camera frames, so the silence is seen while
+                     frames arrive), back to 3 when odometry returns; nothing skipped; the fused
+                     error after the stall that of the clean drive. Measured: 3 -> 4 at 40.50 s,
+                     4 -> 3 at 42.00 s; every frame of the stall used once odometry is back,
+                     error as clean from 45 s on.
 clock_jump_back      from 45 s on, odometry stamps are 5 s earlier (a restarted clock; frames
-                     keep the camera's clock). The node refuses odometry whose stamp does not
-                     increase: the 5 s until the clock passes its old latest stamp are skipped
-                     (499 ``odom_stamp_backwards``, 1 ``odom_duplicate_stamp`` where the stamps
-                     meet). Expected: 3 -> 4 (``odometry dead``) after the odometry timeout.
-                     Measured: no move while skipping; 3 -> 4 at stamp 45.00 s (true 50.00 s) for
-                     the markers' quality (mean NIS 19): odometry now lags the camera by 5 s, fixes
-                     are paired with the wrong odometry (kidnap re-initialization at 45.47 s, fused
-                     error 1-4 m against the truth at the same stamp; back to 3 at 78.4 s in a
-                     90 s run, the lag never undone).
+                     keep the camera's clock). Expected: the node starts over (as ROS tf clears
+                     its buffer on a jump back: buffer, estimate and waiting frames dropped) and
+                     the ladder falls to 4 at once, its reason the jump. Measured: 3 -> 4 at the
+                     first odometry stamp after the jump (40.00 s) with "clock jumped back
+                     4.990 s"; the camera then runs 5 s ahead of the odometry, which the
+                     supervisor sees as silent odometry at every frame: 4 while that lasts.
 duplicated_messages  every message from 30 s to 40 s sent twice. Expected and measured: 1000
                      ``odom_duplicate_stamp`` and 300 ``frame_duplicate_stamp`` skips; the walk
                      (3 at 6.20 s, no other move) and the fused trajectory bit-identical to the

@@ -128,7 +128,7 @@ SCENARIOS: dict[str, ScenarioSpec] = {
     ),
     "clock_jump_back": ScenarioSpec(
         "odometry clock jumps 5 s back at 45 s and runs on from there (camera clock unchanged); "
-        "5 s of odometry skipped as stamped backwards, ladder 3 -> 4 (odometry dead)",
+        "the node starts over and the ladder falls 3 -> 4 at once (clock jumped back)",
         faults=(ClockJump(45.0, 5.0, (OdometryMsg,)),),
     ),
     "duplicated_messages": ScenarioSpec(
