@@ -163,3 +163,30 @@ def test_images_of_the_wrong_size_are_counted_skips(source: ScenarioSource) -> N
     for k in range(3):
         node.feed("/camera/image", ImageMsg(k * S, "camera_optical", image, "mono8"))
     assert node.skipped == {"image_size_mismatch": 3}
+
+
+@pytest.mark.parametrize("planar", [False, True])
+def test_odometry_covariance_growth_adds_to_the_correction_covariance(planar: bool) -> None:
+    """With ``odometry_covariance: growth``, standing still with no fix, the correction's
+    covariance grows by exactly the odometry covariance's growth (the planar block in planar
+    mode); ``ignore`` leaves only the configured walk."""
+    from tagloc.tags import TagMap
+
+    step = np.diag([1e-4, 2e-4, 3e-5, 1e-6, 2e-6, 4e-6])
+    P = {}
+    for mode in ("ignore", "growth"):
+        cfg = LocalizerConfig.model_validate(
+            {"process_noise": {"odometry_covariance": mode}, "filter": {"planar": planar}}
+        )
+        node = LocalizerNode(TagMap.from_yaml_text("version: 1\ntags: []\n", "t"), cfg)
+        T = SE3.identity()
+        node.feed("/odom", OdometryMsg(0, "odom", "base_link", T, np.eye(6) * 1e-3))
+        node.filter.initialize(0, SE3.identity(), np.eye(6) * 1e-2)
+        for k in range(1, 101):
+            cov = np.eye(6) * 1e-3 + k * step
+            node.feed("/odom", OdometryMsg(k * S // 100, "odom", "base_link", T, cov))
+        P[mode] = node.filter.covariance
+    axes = [0, 1, 5] if planar else list(range(6))
+    expected = np.zeros((6, 6))
+    expected[np.ix_(axes, axes)] = (100 * step)[np.ix_(axes, axes)]
+    np.testing.assert_allclose(P["growth"] - P["ignore"], expected, rtol=1e-9, atol=1e-15)

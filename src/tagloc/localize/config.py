@@ -50,6 +50,12 @@ class ProcessNoiseConfig(StrictModel):
     sigma_per_sqrt_s: SigmaVec6 = (0.002, 0.002, 0.002, 0.001, 0.001, 0.001)
     #: Resolution of the odometry path integral (path length and the frame of the noise).
     motion_step_s: float = Field(0.1, gt=0)
+    #: The odometry message's own pose covariance: ``ignore`` it (default: drivers often publish
+    #: a constant), or add its ``growth`` between consecutive messages (the positive part of
+    #: ``cov_k - cov_{k-1}``, in the odometry frame, ROS order ``[x, y, z, rx, ry, rz]``) to the
+    #: correction's covariance, on top of the per-metre walk above (set that low when the
+    #: odometry's covariance is calibrated, e.g. from a VIO or a fused legged estimator).
+    odometry_covariance: Literal["ignore", "growth"] = "ignore"
 
 
 class CalibrationConfig(StrictModel):

@@ -440,6 +440,27 @@ class MapOdomFilter:
             self._advance(stamp_ns, self._lookup(stamp_ns))
         self._out.end_step(stamp_ns, lambda: self._lookup(stamp_ns))  # judged at the robot
 
+    def add_process_noise(self, Q: FloatArray) -> None:
+        """Add ``Q`` ((6, 6), symmetric positive semi-definite, ``[x, y, z, rx, ry, rz]``) to the
+        covariance of ``T_map_odom`` now: odometry error the motion model does not know of (the
+        growth of the odometry's own pose covariance, in the odometry frame: an error ``d`` of
+        ``T_odom_base`` on the left is ``-d`` of the correction on the right, so its covariance
+        adds as it is). Planar: its x, y, yaw block. Before initialization: nothing.
+
+        Raises
+        ------
+        LocalizeError
+            If ``Q`` is not (6, 6), finite and symmetric.
+        """
+        if self._X is None:
+            return
+        Q6 = np.asarray(Q, dtype=np.float64)
+        if Q6.shape != (6, 6) or not np.isfinite(Q6).all() or not np.allclose(Q6, Q6.T):
+            raise LocalizeError("add_process_noise: Q must be a finite symmetric (6, 6) matrix")
+        block = Q6[np.ix_(PLANAR_AXES, PLANAR_AXES)] if self.planar else Q6
+        self._P[: self.dof, : self.dof] += block
+        self.revision += 1
+
     def update(self, fix: TagFix) -> FilterEvent:
         """Decide on one fix and apply it if it passes; return the decision event.
 

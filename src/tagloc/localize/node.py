@@ -171,6 +171,8 @@ class LocalizerNode:
         self._fix_ns: int | None = None  # last accepted fix
         self._odometer_m, self._fix_odometer_m = 0.0, 0.0
         self._last_T: SE3 | None = None
+        self._odom_cov_growth = cfg.process_noise.odometry_covariance == "growth"
+        self._odom_cov: np.ndarray | None = None
         self._tick_ns = -(2**62)
         self._jump_ns = round(cfg.supervisor.clock_jump_s * S_NS)
         self.clock_jumps = 0
@@ -183,7 +185,7 @@ class LocalizerNode:
         """Consume one stream item (other topics and record types are ignored)."""
         t, f = self.topics, self.frames_cfg
         if isinstance(msg, OdometryMsg) and topic == t.odom:
-            self._on_odometry(msg.stamp_ns, msg.T_parent_child)
+            self._on_odometry(msg.stamp_ns, msg.T_parent_child, msg.cov)
         elif isinstance(msg, TransformMsg) and not msg.static:
             if topic == t.tf and (msg.parent, msg.child) == (f.odom_frame, f.base_frame):
                 self._on_odometry(msg.stamp_ns, msg.T_parent_child)
@@ -253,7 +255,7 @@ class LocalizerNode:
         if self.skipped[reason] == 1:
             logger.warning("skipped (%s): %s; further ones are counted", reason, detail)
 
-    def _on_odometry(self, stamp: int, T: SE3) -> None:
+    def _on_odometry(self, stamp: int, T: SE3, cov: np.ndarray | None = None) -> None:
         if not (np.isfinite(T.translation).all() and np.isfinite(T.as_quat()).all()):
             return self._skip("odom_non_finite", f"odometry at {stamp} ns")
         if self._last_odom is not None and stamp <= self._last_odom:
@@ -271,6 +273,8 @@ class LocalizerNode:
         f = self.frames_cfg
         self.buffer.set_transform(f.odom_frame, f.base_frame, stamp, T)
         self.supervisor.on_input("odometry", stamp)
+        if cov is not None and self._odom_cov_growth:
+            self._add_odometry_noise(cov)
         if self.config.output.publish_first:
             self.filter.predict(stamp)
             self._estimate(stamp, T)
@@ -280,6 +284,16 @@ class LocalizerNode:
             self.filter.predict(stamp)
             self._estimate(stamp, T)
         return None
+
+    def _add_odometry_noise(self, cov: np.ndarray) -> None:
+        """``process_noise.odometry_covariance: growth``: the positive part of the odometry
+        covariance's change since the previous message enters the filter's covariance."""
+        last, self._odom_cov = self._odom_cov, cov
+        if last is None or not np.isfinite(cov).all():
+            return
+        w, V = np.linalg.eigh(0.5 * ((cov - last) + (cov - last).T))
+        if w.max() > 0:
+            self.filter.add_process_noise((V * np.clip(w, 0.0, None)) @ V.T)
 
     def _estimate(self, stamp: int, T_odom_base: SE3) -> None:
         """The sample's :class:`Estimate`, the supervisor's step and the status when due. The
@@ -348,7 +362,7 @@ class LocalizerNode:
         self.filter = MapOdomFilter.from_config(self.config, self.buffer)
         self.filter.events.listeners.append(self._emit)
         self._source = None
-        self._last_odom = self._last_T = self._fix_ns = self._cov_last = None
+        self._last_odom = self._last_T = self._fix_ns = self._cov_last = self._odom_cov = None
         self._cov_revision, self._next_publish, self._tick_ns = -1, 0, -(2**62)
         self.supervisor.clock_jumped(stamp)
         self._tick(stamp, f"clock jumped back {back_s:.3f} s: estimate restarted")
