@@ -250,7 +250,7 @@ class RaisingDetector:
 
     def detect(self, image_gray: np.ndarray) -> list[TagDetection]:
         self.calls += 1
-        index = int(np.frombuffer(image_gray.tobytes(), dtype=np.int64)[0])
+        index = int(np.frombuffer(image_gray[0, :8].tobytes(), dtype=np.int64)[0])
         if self.calls % self._every == 0:
             self.raised.append(index)
             raise RuntimeError(f"detector crashed on frame {index}")
@@ -258,15 +258,18 @@ class RaisingDetector:
 
 
 def _as_images(
-    stream: list[tuple[str, Message]], topic: str, drop: set[int] | None = None
-) -> Iterator[tuple[str, Message]]:
-    """Frames as ``ImageMsg`` whose pixels hold the frame's index (``drop``: None), or as the
-    original detections without the frames in ``drop``."""
+    stream: list[tuple[str, Message]], topic: str, drop: set[int] | None = None,
+    size: tuple[int, int] = (0, 0),
+) -> Iterator[tuple[str, Message]]:  # fmt: skip
+    """Frames as ``ImageMsg`` of the camera's ``size`` (width, height) whose first pixels hold
+    the frame's index (``drop``: None), or as the original detections without the frames in
+    ``drop``."""
     index = 0
     for name, msg in stream:
         if isinstance(msg, TagDetectionsMsg):
             if drop is None:
-                pixels = np.frombuffer(np.int64(index).tobytes(), dtype=np.uint8).reshape(1, 8)
+                pixels = np.zeros((size[1], size[0]), np.uint8)
+                pixels[0, :8] = np.frombuffer(np.int64(index).tobytes(), dtype=np.uint8)
                 yield topic, ImageMsg(msg.stamp_ns, msg.frame_id, pixels, "mono8")
             elif index not in drop:
                 yield name, msg
@@ -289,7 +292,8 @@ def test_a_detector_that_raises_is_counted_and_the_node_goes_on() -> None:
         )
 
     images = pipeline(detector)
-    run = images.run(_as_images(stream, images.topics.image))
+    size = (source.camera.width, source.camera.height)
+    run = images.run(_as_images(stream, images.topics.image, size=size))
     assert detector.calls == len(detections) == 901
     assert len(detector.raised) == len(detections) // 3
     assert run.metadata["skipped"] == {"detector_error": len(detector.raised)}
