@@ -127,3 +127,20 @@ def test_a_wrong_detections_topic_is_one_line(drive_bag: tuple[Path, Path], tmp_
     )  # fmt: skip
     assert done.returncode == 1 and "no camera frames" in done.stderr, done.stderr
     assert not out.exists() or not list(out.iterdir())
+
+
+def test_realtime_runs_the_live_order_and_reports_its_latency(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    done = run_tagloc(
+        "localize", "--scenario", "default", "--duration", "12", "--realtime", "--speed", "6",
+        "--out", str(out), "--no-bag",
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert "publish_first: true" in (out / "localizer.yaml").read_text()
+    summary = json.loads((out / "summary.json").read_text())
+    rt = summary["realtime"]
+    assert rt["speed"] == 6.0 and rt["frames_dropped"] == 0  # detections need no worker
+    assert rt["odom_to_estimate"]["n"] == summary["odometry_samples"] == 1201
+    # the frames come as detections (no worker, no drops): the fixes are those of the replay
+    # (69 on this stretch), applied one odometry sample later
+    assert summary["fixes_accepted"] > 60

@@ -119,11 +119,15 @@ def run_node(
     node = wired.node
     sink = RunFilesSink(out, node.config.frames.map_frame, bag=bag, name=wired.name)
     node.sinks.append(sink)
+    extra: dict[str, object] = {}
     try:
         if realtime is not None:
             from tagloc.localize.realtime import run_realtime
 
-            run_realtime(node, wired.stream, speed=realtime)
+            stats = run_realtime(node, wired.stream, speed=realtime)
+            extra["realtime"] = stats.to_dict()
+            for line in stats.lines():
+                logger.info("%s", line)
         else:
             for topic, msg in wired.stream:
                 node.feed(topic, msg)
@@ -132,7 +136,7 @@ def run_node(
     except BaseException:
         sink.abort()
         raise
-    written, lines = sink.close(node.metadata())
+    written, lines = sink.close({**node.metadata(), **extra})
     atomic_write_text(out / "localizer.yaml", node.config.to_yaml_text())
     return [*written, out / "localizer.yaml"], lines
 

@@ -149,6 +149,8 @@ class RunFilesSink:
             "suspect_sources": metadata.get("suspect_sources"),
             "odometry_calibration": metadata.get("odometry_calibration"),
         }  # fmt: skip
+        if "realtime" in metadata:
+            out["realtime"] = metadata["realtime"]
         if self._n_truth:
             out["ate_unaligned_m"] = {k: math.sqrt(v / self._n_truth) for k, v in self._sq.items()}
         return out
