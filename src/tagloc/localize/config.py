@@ -18,8 +18,7 @@ from typing import Annotated, Literal
 import yaml
 from pydantic import Field
 
-from tagloc.config import StrictModel, parse_yaml_mapping, validate
-from tagloc.errors import ConfigError
+from tagloc.config import StrictModel, parse_yaml_mapping, read_text_file, validate
 from tagloc.fileutil import atomic_write_text
 
 _Sigma = Annotated[float, Field(ge=0)]
@@ -192,12 +191,7 @@ class LocalizerConfig(StrictModel):
 
 def load_localizer_config(path: str | os.PathLike[str]) -> LocalizerConfig:
     """Read and validate ``localizer.yaml``. Raises ``ConfigError`` (one line) on any problem."""
-    try:
-        with open(path, encoding="utf-8") as handle:
-            text = handle.read()
-    except OSError as exc:
-        message = f"{os.fspath(path)}: cannot read localizer config: {exc.strerror}"
-        raise ConfigError(message) from None
+    text = read_text_file(path, "localizer config")
     return LocalizerConfig.from_yaml_text(text, source=os.fspath(path))
 
 

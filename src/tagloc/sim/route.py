@@ -13,6 +13,8 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
 
+from tagloc.config import short_repr
+
 FloatArray = NDArray[np.float64]
 
 
@@ -29,7 +31,7 @@ def _check_target(value: Any) -> Any:
         )
     ):
         return (float(value[0]), float(value[1]))
-    raise ValueError(f"expected a checkpoint name or [x, y] in metres, got {value!r}")
+    raise ValueError(f"expected a checkpoint name or [x, y] in metres, got {short_repr(value)}")
 
 
 class Waypoint(BaseModel):

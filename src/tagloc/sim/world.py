@@ -27,9 +27,10 @@ from tagloc.config import (
     StrictModel,
     check_unit_quat,
     parse_yaml_mapping,
+    read_text_file,
     validate,
 )
-from tagloc.errors import ConfigError, SimulationError
+from tagloc.errors import SimulationError
 from tagloc.geometry import SE3, SO3
 from tagloc.sim.odometry import ODOMETRY_MODELS
 from tagloc.sim.robot import Robot
@@ -317,11 +318,7 @@ class World(StrictModel):
 
 def load_world(path: str | os.PathLike[str]) -> World:
     """Read and validate a world file. Raises ``ConfigError`` (one line) on any problem."""
-    try:
-        with open(path, encoding="utf-8") as handle:
-            text = handle.read()
-    except OSError as exc:
-        raise ConfigError(f"{os.fspath(path)}: cannot read world file: {exc.strerror}") from None
+    text = read_text_file(path, "world file")
     return World.from_yaml_text(text, source=os.fspath(path))
 
 

@@ -40,7 +40,14 @@ import pydantic
 import yaml
 from pydantic import Field, field_validator
 
-from tagloc.config import FieldPathError, StrictModel, check_unit_quat, one_line, parse_yaml_mapping
+from tagloc.config import (
+    FieldPathError,
+    StrictModel,
+    check_unit_quat,
+    one_line,
+    parse_yaml_mapping,
+    read_text_file,
+)
 from tagloc.errors import ConfigError, TaglocError
 from tagloc.fileutil import atomic_write_text
 from tagloc.geometry import SE3
@@ -320,12 +327,7 @@ class TagMap:
 
 def load_tag_map(path: str | os.PathLike[str]) -> TagMap:
     """Read and validate a tag map file. Raises :class:`TagMapError` (one line)."""
-    try:
-        with open(path, encoding="utf-8") as handle:
-            text = handle.read()
-    except (OSError, UnicodeDecodeError) as exc:
-        reason = getattr(exc, "strerror", None) or str(exc)
-        raise TagMapError(f"{os.fspath(path)}: cannot read tag map: {reason}") from None
+    text = read_text_file(path, "tag map", error=TagMapError)
     return TagMap.from_yaml_text(text, source=os.fspath(path))
 
 
