@@ -71,6 +71,16 @@ class _StrictLoader(_SafeLoader):
         _check_node_graph(node)
         return self.construct_document(node)
 
+    def construct_object(self, node: yaml.Node, deep: bool = False) -> Any:
+        """The base constructor, with Python errors of odd scalars as YAML errors at the node
+        (integers past 4300 digits, ``2001-02-31``, unhashable keys such as ``{[1]: 2}``)."""
+        try:
+            return super().construct_object(node, deep=deep)
+        except (ValueError, TypeError, AttributeError, OverflowError) as exc:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"cannot read this value ({exc})", node.start_mark
+            ) from None
+
 
 def _children(node: yaml.Node) -> list[yaml.Node]:
     if isinstance(node, yaml.MappingNode):
@@ -130,7 +140,17 @@ def _construct_mapping(loader: _StrictLoader, node: yaml.MappingNode) -> dict[Ha
     return loader.construct_mapping(node, deep=True)
 
 
+def _construct_int(loader: _StrictLoader, node: yaml.ScalarNode) -> int:
+    value = loader.construct_yaml_int(node)
+    if not -(2**63) <= value < 2**64:  # 0xfff... of 20 000 digits would fail only when printed
+        raise yaml.constructor.ConstructorError(
+            None, None, "integer out of the 64-bit range", node.start_mark
+        )
+    return int(value)
+
+
 _StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
+_StrictLoader.add_constructor("tag:yaml.org,2002:int", _construct_int)
 
 
 def one_line(text: str) -> str:

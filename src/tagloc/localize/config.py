@@ -21,7 +21,7 @@ from pydantic import Field
 from tagloc.config import StrictModel, parse_yaml_mapping, read_text_file, validate
 from tagloc.fileutil import atomic_write_text
 
-_Sigma = Annotated[float, Field(ge=0)]
+_Sigma = Annotated[float, Field(ge=0, le=1e3)]
 #: Standard deviations per axis ``[x, y, z, rx, ry, rz]``, each ``>= 0``.
 SigmaVec6 = tuple[_Sigma, _Sigma, _Sigma, _Sigma, _Sigma, _Sigma]
 
@@ -47,8 +47,9 @@ class ProcessNoiseConfig(StrictModel):
     sigma_per_sqrt_rad: SigmaVec6 = (0.02, 0.02, 0.005, 0.005, 0.005, 0.03)
     #: Small time term: keeps the covariance from collapsing while the robot stands still.
     sigma_per_sqrt_s: SigmaVec6 = (0.002, 0.002, 0.002, 0.001, 0.001, 0.001)
-    #: Resolution of the odometry path integral (path length and the frame of the noise).
-    motion_step_s: float = Field(0.1, gt=0)
+    #: Resolution of the odometry path integral (path length and the frame of the noise); finer
+    #: than 5 ms is finer than any odometry and only costs time.
+    motion_step_s: float = Field(0.1, ge=0.005, le=10.0)
 
 
 class CalibrationConfig(StrictModel):
@@ -152,12 +153,12 @@ class FilterConfig(StrictModel):
     #: ``relinearize_tol`` (m or rad). Skipping it errs by about ``|H dx| |nu| / 2``: under
     #: 1-2 mm for steps below 5 cm, far under fix noise; larger steps (start-up, after a gap or
     #: a kidnap, a poor prior) iterate.
-    max_iterations: int = Field(3, ge=1)
+    max_iterations: int = Field(3, ge=1, le=20)
     relinearize_tol: float = Field(0.05, gt=0)
     #: Published corrections kept for ``correction_at``.
-    history_size: int = Field(10_000, ge=1)
+    history_size: int = Field(10_000, ge=1, le=10_000_000)
     #: Events kept in the event log (counts are always exact).
-    max_events: int = Field(100_000, ge=1)
+    max_events: int = Field(100_000, ge=1, le=10_000_000)
 
 
 class LocalizerConfig(StrictModel):
