@@ -158,6 +158,13 @@ def one_line(text: str) -> str:
     return " ".join(text.split())
 
 
+def clip_message(problem: str) -> str:
+    """``problem`` cut to 240 characters: a backstop for validators that quote whole values."""
+    return (
+        problem if len(problem) <= _MAX_MESSAGE_CHARS else problem[: _MAX_MESSAGE_CHARS - 3] + "..."
+    )
+
+
 def short_repr(value: object, limit: int = MAX_QUOTED_CHARS) -> str:
     """``repr(value)`` cut to ``limit`` characters (``...`` at the end), never built in full."""
     text = _SHORT_REPR.repr(value)
@@ -273,9 +280,7 @@ def format_validation_error(
             if first["type"] == "union_tag_invalid"
             else "field required"
         )
-    msg = msg.removeprefix("Value error, ")
-    if len(msg) > _MAX_MESSAGE_CHARS:
-        msg = msg[: _MAX_MESSAGE_CHARS - 3] + "..."
+    msg = clip_message(msg.removeprefix("Value error, "))
     loc = [p for k, p in enumerate(loc) if not (k and p in union_tags)]
     path = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in loc).lstrip(".")
     more = (

@@ -44,9 +44,11 @@ from tagloc.config import (
     FieldPathError,
     StrictModel,
     check_unit_quat,
+    clip_message,
     one_line,
     parse_yaml_mapping,
     read_text_file,
+    short_repr,
 )
 from tagloc.errors import ConfigError, TaglocError
 from tagloc.fileutil import atomic_write_text
@@ -128,7 +130,7 @@ class TagEntry(StrictModel):
             raise ValueError(f"must be 6 rows of 6 numbers or 36 numbers, got {len(value)} items")
         for i, row in enumerate(value):
             if not isinstance(row, list | tuple) or len(row) != 6:
-                raise FieldPathError((i,), f"must be a row of 6 numbers, got {row!r}")
+                raise FieldPathError((i,), f"must be a row of 6 numbers, got {short_repr(row)}")
         return value
 
     @pydantic.model_validator(mode="after")
@@ -351,6 +353,7 @@ def _validated(model: type[ModelT], data: dict[str, Any], source: str) -> ModelT
         loc, message = list(first["loc"]), first["msg"].removeprefix("Value error, ")
         if isinstance(error := first.get("ctx", {}).get("error"), FieldPathError):
             loc, message = loc + list(error.path), str(error)
+        message = clip_message(message)
         parts = [source]
         if len(loc) > 1 and loc[0] == "tags" and isinstance(loc[1], int):
             tags = data.get("tags")
@@ -372,7 +375,7 @@ def _entry_problem(tag: TagEntry) -> tuple[Path_, str] | None:
     if tag.id < 0 or (tag.observations or 0) < 0:
         return ("id" if tag.id < 0 else "observations",), "must be >= 0"
     if tag.family not in FAMILIES:
-        return ("family",), f"unknown family {tag.family!r}; known: {', '.join(FAMILIES)}"
+        return ("family",), f"unknown family {short_repr(tag.family)}; known: {', '.join(FAMILIES)}"
     if tag.id >= num_ids:
         return ("id",), f"{tag.id} is out of range for {tag.family} (0..{num_ids - 1})"
     if tag.size <= 0:
@@ -381,7 +384,7 @@ def _entry_problem(tag: TagEntry) -> tuple[Path_, str] | None:
         bounds = f"[{MIN_TAG_SIZE_M:g}, {MAX_TAG_SIZE_M:g}]"
         return ("size",), f"{tag.size:g} is outside {bounds}: sizes are metres, not millimetres"
     if not _FRAME_NAME.fullmatch(tag.frame):
-        return ("frame",), f"bad frame name {tag.frame!r} (letters, digits, _ . / -)"
+        return ("frame",), f"bad frame name {short_repr(tag.frame)} (letters, digits, _ . / -)"
     for k, coordinate in enumerate(tag.position):
         if abs(coordinate) > MAX_COORD_M:
             return ("position", k), f"{coordinate:g} m is beyond +-{MAX_COORD_M:g} m"
