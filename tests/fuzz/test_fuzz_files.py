@@ -291,3 +291,56 @@ def _use_tum(path: Path) -> None:
 @given(edits=TUM_EDITS)
 def test_tum_bytes(tmp_path: Path, edits: Any) -> None:
     _load_or_refuse(_use_tum, tmp_path / "t.tum", _damaged(TUM_TEXT.encode(), edits))
+
+
+# ----- tagSLAM rig files (camera_poses.yaml, tagslam.yaml) ---------------------------------------
+TAGSLAM_TEXT = """\
+bodies:
+  - rig:
+      odom_topic: /odom
+      ignore_tags: [5, 6]
+      T_body_odom: {position: {x: 0.1, y: 0, z: 0}, rotation: {x: 0, y: 0, z: 0.1}}
+  - lab:
+      is_static: true
+      default_tag_size: 0.16
+      tags:
+        - {id: 1, size: 0.2, pose: {position: {x: 1, y: 2, z: 0}, rotation: {x: 0, y: 0, z: 1}}}
+        - {id: 2}
+tag_id_remap:
+  - id: 20
+    remaps: [{remap_id: 420, start_time: 10.0, end_time: 20.0}]
+"""
+CAMERA_POSES_TEXT = """\
+cam0:
+  pose: {position: {x: 0.1, y: 0, z: 0.2}, rotation: {x: 0, y: 0, z: 0}}
+cam1:
+  pose: {position: {x: -0.1, y: 0, z: 0.2}, rotation: {x: 0, y: 0, z: 3.14}}
+"""
+
+
+def _use_rig(path: Path) -> None:
+    from tagloc.mapping.stream_survey import parse_camera_poses, parse_tagslam
+
+    text = path.read_bytes().decode("utf-8", errors="replace")
+    parser = parse_tagslam if path.name == "tagslam.yaml" else parse_camera_poses
+    try:
+        parser(text, str(path))
+    except TaglocError as exc:
+        _expect_one_line(exc, path)
+        event(f"refused: {type(exc).__name__}")
+
+
+@FUZZ
+@given(data=st.data(), which=st.sampled_from(["tagslam.yaml", "camera_poses.yaml"]))
+def test_rig_yaml_values(tmp_path: Path, data: st.DataObject, which: str) -> None:
+    text = _value_damage(TAGSLAM_TEXT if which == "tagslam.yaml" else CAMERA_POSES_TEXT, data)
+    (tmp_path / which).write_text(text)
+    _use_rig(tmp_path / which)
+
+
+@FUZZ
+@given(edits=EDITS, which=st.sampled_from(["tagslam.yaml", "camera_poses.yaml"]))
+def test_rig_yaml_bytes(tmp_path: Path, edits: Any, which: str) -> None:
+    text = TAGSLAM_TEXT if which == "tagslam.yaml" else CAMERA_POSES_TEXT
+    (tmp_path / which).write_bytes(_damaged(text.encode(), edits))
+    _use_rig(tmp_path / which)
