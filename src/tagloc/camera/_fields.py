@@ -57,6 +57,15 @@ def finite_float(value: object, field: str) -> float:
     return number
 
 
+def bounded(number: float, field: str, low: float, high: float, unit: str) -> float:
+    """``number`` if ``low <= number <= high``; else a CameraModelError naming the range (the
+    bounds keep projections of plausible cameras far from overflow)."""
+    if not low <= number <= high:
+        where = f"[{low:g}, {high:g}]" + (f" {unit}" if unit else "")
+        raise CameraModelError(f"{field}: {number:g} is outside {where}")
+    return number
+
+
 def positive_float(value: object, field: str) -> float:
     """``value`` as a finite, strictly positive ``float``."""
     number = finite_float(value, field)
