@@ -276,7 +276,7 @@ def format_validation_error(
     elif first["type"] in ("union_tag_invalid", "union_tag_not_found"):
         loc.append(ctx["discriminator"].strip("'"))
         msg = (
-            f"unknown value {ctx['tag']!r}; allowed: {ctx['expected_tags']}"
+            f"unknown value {short_repr(ctx['tag'])}; allowed: {ctx['expected_tags']}"
             if first["type"] == "union_tag_invalid"
             else "field required"
         )

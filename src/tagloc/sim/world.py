@@ -224,7 +224,7 @@ class World(StrictModel):
     """A simulated building and the robot that drives through it (see the module docstring)."""
 
     version: Literal[1]
-    name: str = ""
+    name: str = Field(default="", max_length=200)
     walls: tuple[Wall, ...] = ()
     tags: tuple[Tag, ...] = ()
     elevator: Elevator | None = None
