@@ -60,6 +60,8 @@ DEFAULT_FAMILY = "tag36h11"
 MAP_FRAME = "map"
 #: Sanity bounds: sizes in [1 mm, 5 m] catch millimetres typed as metres; coordinates +-100 km.
 MIN_TAG_SIZE_M, MAX_TAG_SIZE_M, MAX_COORD_M = 1e-3, 5.0, 1e5
+#: Largest covariance entry of a tag pose (m^2, rad^2): beyond it, products overflow downstream.
+MAX_COVARIANCE = 1e4
 _FRAME_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_./-]*")
 _AXES = ("x", "y", "z", "rx", "ry", "rz")
 _INFLATIONS = (0.0, 1e-3, 3e-3, 1e-2, 3e-2, 1e-1)
@@ -400,6 +402,9 @@ def _covariance_problem(cov: npt.NDArray[np.float64]) -> tuple[Path_, str] | Non
     PSD is tested on the correlation matrix (units cancel): its least eigenvalue >= -1e-9.
     """
     variances = np.diag(cov)
+    if (big := float(np.abs(cov).max())) > MAX_COVARIANCE:
+        row, col = divmod(int(np.argmax(np.abs(cov))), 6)
+        return (row, col), f"{big:.3g} is beyond {MAX_COVARIANCE:g} (a 100 m or rad sigma)"
     for i, j in itertools.combinations_with_replacement(range(6), 2):
         a, b = cov[i, j], cov[j, i]
         if i == j and a < 0:
