@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from tagloc.errors import ConfigError
-from tagloc.localize import load_localizer_config
+from tagloc.localize import LocalizerConfig, load_localizer_config
 
 
 @pytest.mark.parametrize(
@@ -46,4 +46,14 @@ def test_non_utf8_localizer_names_file_and_offset(tmp_path: Path) -> None:
         load_localizer_config(path)
     assert str(info.value) == (
         f"{path}: localizer config is not UTF-8 text: byte 0xe4 at offset 22"
+    )
+
+
+def test_huge_windows_and_distances_are_refused_not_overflowed() -> None:
+    text = "gates:\n  consistency_window_s: 1.0e+300\nkidnap:\n  window_s: 1.0e+300\n"
+    with pytest.raises(ConfigError) as info:
+        LocalizerConfig.from_yaml_text(text, "localizer.yaml")
+    assert str(info.value) == (
+        "localizer.yaml: gates.consistency_window_s: input should be less than or equal to "
+        "1000000 (and 1 more error)"
     )

@@ -29,9 +29,9 @@ SigmaVec6 = tuple[_Sigma, _Sigma, _Sigma, _Sigma, _Sigma, _Sigma]
 class FramesConfig(StrictModel):
     """Frame names (configuration, never literals in the algorithm)."""
 
-    map_frame: str = Field("map", min_length=1)
-    odom_frame: str = Field("odom", min_length=1)
-    base_frame: str = Field("base_link", min_length=1)
+    map_frame: str = Field("map", min_length=1, max_length=200)
+    odom_frame: str = Field("odom", min_length=1, max_length=200)
+    base_frame: str = Field("base_link", min_length=1, max_length=200)
 
 
 class ProcessNoiseConfig(StrictModel):
@@ -81,26 +81,26 @@ class GatesConfig(StrictModel):
     chi2_quantile: float = Field(0.999, gt=0, lt=1)
     #: A fix whose own RMS reprojection error exceeds this is never used (a glint, blur, a bad
     #: corner): good AprilTag corners are at 0.1-0.5 px.
-    max_reproj_err_px: float = Field(2.0, gt=0)
+    max_reproj_err_px: float = Field(2.0, gt=0, le=1e6)
     #: IPPE ambiguity ratio above which a fix is refused (None: no limit; the chi-square gate
     #: already refuses a flipped branch once the state is known).
-    max_ambiguity_ratio: float | None = Field(None, gt=0)
+    max_ambiguity_ratio: float | None = Field(None, gt=0, le=1e6)
     #: Camera-to-tag range above which a fix is refused (None: no limit).
-    max_range_m: float | None = Field(None, gt=0)
+    max_range_m: float | None = Field(None, gt=0, le=1e6)
     #: Mutually consistent fixes required at start-up and after a gap before any is applied.
-    k_consistent: int = Field(3, ge=1)
+    k_consistent: int = Field(3, ge=1, le=100_000)
     #: The k fixes must lie within this window.
-    consistency_window_s: float = Field(3.0, gt=0)
+    consistency_window_s: float = Field(3.0, gt=0, le=1e6)
     #: A gap (re-acquisition needs k consistent fixes again): no accepted fix for this long ...
-    gap_s: float = Field(10.0, gt=0)
+    gap_s: float = Field(10.0, gt=0, le=1e6)
     #: ... or over this much travel.
-    gap_m: float = Field(5.0, gt=0)
+    gap_m: float = Field(5.0, gt=0, le=1e6)
 
 
 class CapConfig(StrictModel):
     """Largest jump of the published ``map -> base`` (at the robot's pose) per update."""
 
-    max_translation_m: float = Field(0.25, gt=0)
+    max_translation_m: float = Field(0.25, gt=0, le=1e6)
     max_rotation_deg: float = Field(5.0, gt=0, le=180)
     #: Publish the new correction at once on (re)initialization (a declared re-localization)
     #: instead of walking to it at the capped rate.
@@ -112,35 +112,35 @@ class KidnapConfig(StrictModel):
 
     enabled: bool = True
     #: Gated fixes, mutually consistent, with no accepted fix between them, that re-initialize.
-    n_fixes: int = Field(4, ge=2)
+    n_fixes: int = Field(4, ge=2, le=100_000)
     #: Distinct sources among them: one tag alone cannot tell a kidnap from a moved tag.
-    min_sources: int = Field(2, ge=1)
+    min_sources: int = Field(2, ge=1, le=100_000)
     #: The n fixes must lie within this window.
-    window_s: float = Field(5.0, gt=0)
+    window_s: float = Field(5.0, gt=0, le=1e6)
     #: Or this many such fixes of a single source (0: never from one tag alone), each putting
     #: the robot at least ``one_source_min_jump_m`` from where the filter thinks it is. After a
     #: kidnap often one tag is in view: one tag seen for half a second (15 frames at 30 Hz)
     #: re-localizes. The distance rule keeps a tag moved since the survey (by less than that)
     #: from re-localizing the robot when seen alone; seen with other tags it is flagged suspect
     #: after ``suspect.min_gated`` fixes, long before this.
-    n_fixes_one_source: int = Field(15, ge=0)
-    one_source_min_jump_m: float = Field(1.0, ge=0)
+    n_fixes_one_source: int = Field(15, ge=0, le=100_000)
+    one_source_min_jump_m: float = Field(1.0, ge=0, le=1e6)
 
 
 class SuspectConfig(StrictModel):
     """Flag a source (a moved tag) whose fixes are gated while other sources are accepted."""
 
     #: Consecutive gated fixes of the source, with another source accepted meanwhile.
-    min_gated: int = Field(3, ge=1)
+    min_gated: int = Field(3, ge=1, le=100_000)
     #: Consecutive fixes of a suspect source that pass the gate (not applied) to clear it.
-    clear_after: int = Field(10, ge=1)
+    clear_after: int = Field(10, ge=1, le=100_000)
     #: Consecutive gated fixes count as "wrong the same way" only if the corrections they imply
     #: agree within this (m, and deg below): a moved tag repeats its pose to centimetres, while
     #: glints decoded under its id are vague (metres of covariance) and pass a chi-square pair
     #: test for that reason alone. Two gated fixes are compared only if they are at most
     #: ``kidnap.window_s`` apart (the same window the kidnap test uses).
-    max_spread_m: float = Field(0.3, gt=0)
-    max_spread_deg: float = Field(5.0, gt=0)
+    max_spread_m: float = Field(0.3, gt=0, le=1e6)
+    max_spread_deg: float = Field(5.0, gt=0, le=180)
 
 
 class FilterConfig(StrictModel):
@@ -154,7 +154,7 @@ class FilterConfig(StrictModel):
     #: 1-2 mm for steps below 5 cm, far under fix noise; larger steps (start-up, after a gap or
     #: a kidnap, a poor prior) iterate.
     max_iterations: int = Field(3, ge=1, le=20)
-    relinearize_tol: float = Field(0.05, gt=0)
+    relinearize_tol: float = Field(0.05, gt=0, le=1e6)
     #: Published corrections kept for ``correction_at``.
     history_size: int = Field(10_000, ge=1, le=10_000_000)
     #: Events kept in the event log (counts are always exact).
