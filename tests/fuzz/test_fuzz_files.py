@@ -22,8 +22,15 @@ from hypothesis import strategies as st
 from tagloc.config import MAX_QUOTED_CHARS
 from tagloc.errors import TaglocError
 from tagloc.frames import TransformBuffer
+from tagloc.geometry import SE3
 from tagloc.io import load_kalibr_cameras, read_tum
-from tagloc.localize import LocalizerConfig, MapOdomFilter, load_localizer_config
+from tagloc.localize import (
+    FixQuality,
+    LocalizerConfig,
+    MapOdomFilter,
+    TagFix,
+    load_localizer_config,
+)
 from tagloc.sim import load_default_world, load_world, simulate_drive
 from tagloc.sim.coverage import route_coverage
 from tagloc.sim.scenarios import tag_map_from_world
@@ -50,7 +57,9 @@ _edit = st.tuples(
 EDITS = st.tuples(
     st.lists(_edit, min_size=1, max_size=5), st.one_of(st.none(), st.integers(0, 2**20))
 )
+S = 1_000_000_000
 NASTY = st.one_of(
+    st.sampled_from([1e308, -1e308, 1e300, 1e-300, 1e-9, 2**63 - 1, 10**18]),
     st.sampled_from([math.nan, math.inf, -math.inf, 1e308, -1e308, 5e-324, 0, -1, 2**63, -(2**63),
                      2**64 - 1, True, None, "", "x" * 300, [], {}, [[[[]]]], {"a": {"b": 1}}]),
     st.floats(),
@@ -205,7 +214,24 @@ LOCALIZER_TEXT = LocalizerConfig().to_yaml_text()
 
 
 def _use_localizer(path: Path) -> None:
-    MapOdomFilter.from_config(load_localizer_config(path), TransformBuffer())
+    """Load, build the filter and run it over 2 s of odometry with one fix."""
+    config = load_localizer_config(path)
+    stamps = np.arange(0, 2 * S, S // 50)
+    forward = np.zeros((len(stamps), 6))
+    forward[:, 0], forward[:, 5] = np.linspace(0.0, 2.0, len(stamps)), 0.3
+    buffer = TransformBuffer()
+    buffer.set_transforms(
+        config.frames.odom_frame, config.frames.base_frame, stamps, SE3.exp(forward)
+    )
+    flt = MapOdomFilter.from_config(config, buffer)
+    flt.initialize(0, SE3.identity(), np.eye(6) * 1e-2)
+    for stamp in stamps[::5].tolist():
+        flt.predict(stamp)
+    flt.update(TagFix(int(stamps[-1]), SE3.exp(forward[-1]), np.eye(6) * 1e-3, "tag:1",
+                      FixQuality(0.4)))  # fmt: skip
+    assert np.all(np.isfinite(flt.covariance)) and np.all(
+        np.isfinite(flt.correction_at(2 * S).as_matrix())
+    )
 
 
 @FUZZ
