@@ -20,9 +20,10 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
-from test_localize_sim import Drive, S, make_filter, simulate
+from test_localize_sim import Drive, S, make_filter, make_fix, simulate
 
 from tagloc.errors import TaglocError
 from tagloc.frames import TransformBuffer
@@ -169,3 +170,25 @@ def test_random_fix_sequences_keep_the_filter_sane_and_the_jumps_capped(
         previous = (t, current)
     for kind, count in flt.events.counts_by_kind().items():
         event(f"{kind.value} events: {'none' if count == 0 else 'some'}")
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="CorrectionPublisher._clip rebuilds the clipped correction with transpose-inverses of "
+    "matrices that hold the previous (clipped) publication: its rotation's non-orthogonality "
+    "about triples per capped publication",
+)
+def test_published_correction_stays_a_rotation_while_walking_at_the_cap() -> None:
+    drive = _drive(0)
+    buffer = TransformBuffer(window_ns=1000 * S)
+    drive.fill(buffer)
+    flt = make_filter(buffer, cap={"max_translation_m": 0.5, "max_rotation_deg": 0.5})
+    T_map_odom_wrong = SE3.exp(np.array([0.0, 0.0, 0.0, 0.0, 0.0, 1.0])) @ drive.T_map_odom(0)
+    flt.initialize(0, T_map_odom_wrong, np.eye(6))  # 57 deg off: walked back at 0.5 deg a step
+    rng = np.random.default_rng(0)
+    for k, t in enumerate(drive.stamps_ns[::10].tolist()):  # 14 s
+        if k % 2 == 0:
+            flt.update(make_fix(drive, t, rng))
+        flt.predict(t)
+    R = flt.correction_at(int(drive.stamps_ns[-1])).rotation.as_matrix()
+    assert np.abs(R.T @ R - np.eye(3)).max() < 1e-9
