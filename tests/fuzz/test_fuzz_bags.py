@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from fuzz_helpers import damaged
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
@@ -82,14 +83,6 @@ EDITS = st.tuples(
 )
 
 
-def _damaged(data: bytes, edits: tuple[list[tuple[int, int, bytes]], int | None]) -> bytes:
-    changes, cut = edits
-    for position, deleted, inserted in changes:
-        at = position % (len(data) + 1)
-        data = data[:at] + inserted + data[at + deleted :]
-    return data if cut is None else data[: cut % (len(data) + 1)]
-
-
 def _read_all(path: Path) -> None:
     try:
         for _, msg in BagSource(path):
@@ -112,7 +105,7 @@ def _read_all(path: Path) -> None:
 @given(edits=EDITS)
 def test_damaged_bag_file(tmp_path: Path, bags: dict[str, Path], fmt: str, edits: Any) -> None:
     path = tmp_path / bags[fmt].name
-    path.write_bytes(_damaged(bags[fmt].read_bytes(), edits))
+    path.write_bytes(damaged(bags[fmt].read_bytes(), edits))
     _read_all(path)
 
 
@@ -123,5 +116,5 @@ def test_damaged_ros2_bag(tmp_path: Path, bags: dict[str, Path], part: str, edit
     path = tmp_path / "a_bag"
     shutil.rmtree(path, ignore_errors=True)
     shutil.copytree(bags["ros2"], path)
-    (path / part).write_bytes(_damaged((path / part).read_bytes(), edits))
+    (path / part).write_bytes(damaged((path / part).read_bytes(), edits))
     _read_all(path)
