@@ -95,6 +95,11 @@ def _init_fields(camera: object) -> list[dataclasses.Field[Any]]:
         ({"cx": math.inf}, r"PinholeRadtan\.cx: must be finite"),
         ({"k1": math.nan}, r"PinholeRadtan\.k1: must be finite"),
         ({"p2": "0.1"}, r"PinholeRadtan\.p2: expected a number"),
+        ({"fx": 1e308}, r"PinholeRadtan\.fx: 1e\+308 is outside \[1, 1e\+07\] px"),
+        ({"fy": 1e-300}, r"PinholeRadtan\.fy: 1e-300 is outside \[1, 1e\+07\] px"),
+        ({"cy": -1e300}, r"PinholeRadtan\.cy: -1e\+300 is outside \[-1e\+07, 1e\+07\] px"),
+        ({"width": 10**9}, r"PinholeRadtan\.width: 1e\+09 is outside \[1, 100000\] px"),
+        ({"k3": 1e300}, r"PinholeRadtan\.k3: 1e\+300 is outside \[-10000, 10000\]$"),
     ],
 )
 def test_direct_construction_is_validated(changes: dict[str, Any], message: str) -> None:

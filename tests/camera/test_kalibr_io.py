@@ -98,7 +98,7 @@ def test_good_file_in_order(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("text", "message"),
     [
-        ("cam0: [1, 2\n", "not valid YAML"),
+        ("cam0: [1, 2\n", "line 2, column 1: invalid YAML: did not find expected"),
         ("", "expected a mapping of camera names .* got an empty file"),
         ("- cam0\n", "expected a mapping of camera names .* got list"),
         ("cam0: 3\n", "cam0: expected a mapping"),

@@ -81,3 +81,16 @@ def test_bad_trajectories_are_rejected(defect: str) -> None:
         return
     with pytest.raises(EvaluationError):
         absolute_trajectory_error(stamps, T_ref, T_est)
+
+
+@pytest.mark.parametrize("line", [False, True])
+def test_alignment_of_a_degenerate_reference_is_one_evaluation_error(line: bool) -> None:
+    stamps = np.arange(1, 11, dtype=np.int64) * 1_000_000_000
+    xyz = np.zeros((10, 3))
+    if line:
+        xyz[:, 0] = np.linspace(0.0, 9.0, 10)
+    T_ref = SE3(rotation=SO3.identity(10), translation=xyz)
+    T_est = SE3(rotation=SO3.identity(10), translation=xyz + np.array([0.1, 0.0, 0.0]))
+    with pytest.raises(EvaluationError, match=r"^cannot align the estimate: the reference"):
+        absolute_trajectory_error(stamps, T_ref, T_est, align=True)
+    assert absolute_trajectory_error(stamps, T_ref, T_est).rmse == pytest.approx(0.1)

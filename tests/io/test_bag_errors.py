@@ -145,6 +145,17 @@ def test_bz2_compressed_file_is_decompressed_once_into_a_cache(tmp_path: Path) -
     assert not list(cache.rglob("b.bag*"))
 
 
+def test_bz2_bomb_is_refused_before_it_fills_the_disk(tmp_path: Path) -> None:
+    packed = tmp_path / "bomb.bag.bz2"
+    packed.write_bytes(bz2.compress(bytes(65 * 2**20)))  # 65 MiB of zeros in ~200 bytes
+    cache = tmp_path / "cache"
+    with pytest.raises(
+        BagFormatError, match=r"^\S*bomb\.bag\.bz2: decompresses to more than 67108864 bytes"
+    ):
+        BagSource(packed, cache_dir=cache)
+    assert not [p for p in cache.rglob("*") if p.is_file()]
+
+
 # ----- topics -------------------------------------------------------------------------------------
 def test_missing_topic_lists_what_the_bag_has(tmp_path: Path) -> None:
     path = raw_bag(tmp_path / "a.mcap", [odom(S)])

@@ -111,3 +111,33 @@ def test_write_validates_and_is_atomic(tmp_path: Path, trajectory: tuple[np.ndar
     write_tum(target, 5, SE3.identity())  # a single pose
     assert read_tum(target)[0].tolist() == [5]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["t.txt"]
+
+
+@pytest.mark.parametrize(
+    ("line", "match"),
+    [
+        ("2.0 1e308 0 0 0 0 0 1", r"line 3: position coordinate 1e\+308 m is beyond 1e\+08 m"),
+        ("2.0 0 0 -2e8 0 0 0 1", r"line 3: position coordinate 2e\+08 m is beyond"),
+        ("1e20 0 0 0 0 0 0 1", r"line 3: timestamp 1e20 is past the int64 nanosecond range"),
+        ("1e999999999 0 0 0 0 0 0 1", r"line 3: timestamp 1e999999999 is past the int64"),
+        ("2.0 1 2 inf 0 0 0 1", r"line 3: NaN or infinite value"),
+        ("2.0 1 2 3 1e-300 0 0 1e-300", r"line 3: quaternion .* is not unit: \|q\| = 0 "),
+        ("2.0 1 2 3 0 0 1e200 1e200", r"line 3: quaternion .* is not unit: \|q\| = inf"),
+        ("9" * 5000 + " 0 0 0 0 0 0 1", r"line 3: timestamp 9{57}\.\.\. is past"),
+    ],
+)
+def test_values_that_would_overflow_later_are_refused(
+    tmp_path: Path, line: str, match: str
+) -> None:
+    (tmp_path / "t.txt").write_text(f"# header\n1.0 0 0 0 0 0 0 1\n{line}\n")
+    with pytest.raises(TrajectoryFileError, match=f"t.txt: {match}") as info:
+        read_tum(tmp_path / "t.txt")
+    assert len(str(info.value)) < 200 + len(str(tmp_path))
+
+
+def test_unreadable_files_are_one_line(tmp_path: Path) -> None:
+    (tmp_path / "latin1.txt").write_bytes(b"# caf\xe9\n1.0 0 0 0 0 0 0 1\n")
+    with pytest.raises(TrajectoryFileError, match=r"latin1\.txt: .* not UTF-8 text: byte 0xe9"):
+        read_tum(tmp_path / "latin1.txt")
+    with pytest.raises(TrajectoryFileError, match=r": cannot read the trajectory file: Is a dir"):
+        read_tum(tmp_path)

@@ -146,6 +146,58 @@ CASES: list[tuple[str, Callable[[Doc], None], str]] = [
         lambda d: _set(d, ["checkpoints", 4, "name"], "start"),
         "checkpoints[4].name: duplicate checkpoint 'start' (also checkpoints[0])",
     ),
+    (
+        "route of one repeated waypoint",
+        lambda d: _set(d, ["route", "waypoints"], ["start", "start", {"at": "start"}]),
+        "route.waypoints: the route needs at least two distinct waypoints",
+    ),
+    (
+        "tiny speed",
+        lambda d: _set(d, ["route", "speed"], 1e-9),
+        "route.speed: input should be greater than or equal to 0.01",
+    ),
+    (
+        "dwells past the sample budget",
+        lambda d: (_set(d, ["route", "dwell"], 3600), _set(d, ["route", "repeat"], 10)),
+        "route: driving the route (1926 m, repeat 10) takes 1228683 s, 1.23e+08 odometry "
+        "samples at robot.odom_rate_hz, more than 500000;",
+    ),
+    (
+        "waypoint far away",
+        lambda d: _set(d, ["route", "waypoints", 1], [1e300, 0.0]),
+        "route.waypoints[1].at: expected a checkpoint name or [x, y] in metres "
+        "(|x|, |y| <= 100000), "
+        "got [1e+300, 0.0]",
+    ),
+    (
+        "checkpoint far away",
+        lambda d: _set(d, ["checkpoints", 1, "x"], -1e300),
+        "checkpoints[1].x: input should be greater than or equal to -100000",
+    ),
+    (
+        "wall far away",
+        lambda d: _set(d, ["walls", 1, "end"], [1e300, 0]),
+        "walls[1].end[0]: input should be less than or equal to 100000",
+    ),
+    (
+        "tiny focal length",
+        lambda d: _set(d, ["robot", "camera", "intrinsics", "fx"], 1e-300),
+        "robot.camera.intrinsics.fx: input should be greater than or equal to 1",
+    ),
+    (
+        "huge distortion",
+        lambda d: _set(
+            d, ["robot", "camera", "distortion"], {"model": "radtan", "coefficients": [1e300] * 4}
+        ),
+        "robot.camera.distortion.coefficients[0]: input should be less than or equal to 1000 "
+        "(and 3 more errors)",
+    ),
+    (
+        "long bad waypoint is quoted by a prefix",
+        lambda d: _set(d, ["route", "waypoints", 2], [[1.0] * 10_000] * 3),
+        "route.waypoints[2].at: expected a checkpoint name or [x, y] in metres (|x|, |y| <= "
+        "100000), got [[1.0, 1.0, 1.0, 1.0, 1.0, 1.0, ...], [1.0, 1.0, 1.0, 1.0...",
+    ),
 ]
 
 
@@ -157,6 +209,7 @@ def test_bad_world_names_file_and_field(
     mutate(doc)
     message = _load_error(tmp_path, yaml.safe_dump(doc, sort_keys=False))
     assert message.startswith(expected), message
+    assert len(message) < 400
 
 
 def test_several_errors_still_one_line(tmp_path: Path) -> None:

@@ -239,6 +239,11 @@ CASES = [
         "tags.yaml: tags[4] (id 17): covariance[3][3]: variance of rx must be >= 0, got -0.001",
     ),
     (
+        _set(("tags", 4, "covariance", 1, 1), 1e300),
+        "tags.yaml: tags[4] (id 17): covariance[1][1]: 1e+300 is beyond 10000 (a 100 m or rad "
+        "sigma)",
+    ),
+    (
         _set(("tags", 4, "covariance"), [1e-6] * 35),
         "tags.yaml: tags[4] (id 17): covariance: must be 6 rows of 6 numbers or 36 numbers, got "
         "35 items",

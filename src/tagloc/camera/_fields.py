@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from tagloc.config import short_repr
 from tagloc.errors import CameraModelError
 
 
@@ -34,13 +35,13 @@ def get(mapping: Mapping[str, Any], keys: tuple[str, ...], where: str) -> Any:
 def positive_int(value: object, field: str) -> int:
     """``value`` as a positive ``int`` (a float with an integral value is accepted)."""
     if isinstance(value, bool) or not isinstance(value, Real):
-        raise CameraModelError(f"{field}: expected a positive integer, got {value!r}")
+        raise CameraModelError(f"{field}: expected a positive integer, got {short_repr(value)}")
     if isinstance(value, Integral):
         number = int(value)
     elif math.isfinite(float(value)) and float(value).is_integer():
         number = int(float(value))
     else:
-        raise CameraModelError(f"{field}: expected a positive integer, got {value!r}")
+        raise CameraModelError(f"{field}: expected a positive integer, got {short_repr(value)}")
     if number <= 0:
         raise CameraModelError(f"{field}: must be positive, got {number}")
     return number
@@ -49,10 +50,19 @@ def positive_int(value: object, field: str) -> int:
 def finite_float(value: object, field: str) -> float:
     """``value`` as a finite ``float``."""
     if isinstance(value, bool) or not isinstance(value, Real):
-        raise CameraModelError(f"{field}: expected a number, got {value!r}")
+        raise CameraModelError(f"{field}: expected a number, got {short_repr(value)}")
     number = float(value)
     if not math.isfinite(number):
         raise CameraModelError(f"{field}: must be finite, got {number}")
+    return number
+
+
+def bounded(number: float, field: str, low: float, high: float, unit: str) -> float:
+    """``number`` if ``low <= number <= high``; else a CameraModelError naming the range (the
+    bounds keep projections of plausible cameras far from overflow)."""
+    if not low <= number <= high:
+        where = f"[{low:g}, {high:g}]" + (f" {unit}" if unit else "")
+        raise CameraModelError(f"{field}: {number:g} is outside {where}")
     return number
 
 
@@ -84,7 +94,7 @@ def float_list(value: object, field: str, counts: tuple[int, ...], what: str) ->
     elif isinstance(value, Sequence) and not isinstance(value, str | bytes):
         items = list(value)
     else:
-        raise CameraModelError(f"{field}: expected a list of numbers, got {value!r}")
+        raise CameraModelError(f"{field}: expected a list of numbers, got {short_repr(value)}")
     if len(items) not in counts:
         expected = " or ".join(str(c) for c in counts)
         raise CameraModelError(f"{field}: expected {expected} values for {what}, got {len(items)}")

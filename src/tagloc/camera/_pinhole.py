@@ -20,6 +20,20 @@ from tagloc.camera import _fields
 from tagloc.camera.model import BoolArray, FloatArray, as_vectors
 from tagloc.errors import CameraModelError
 
+#: Largest image side, focal length and principal point offset (px), distortion coefficient:
+#: far beyond any real camera, and far from overflow in projection.
+MAX_IMAGE_SIDE_PX = 100_000
+MAX_FOCAL_PX = 1e7
+MAX_COEFFICIENT = 1e4
+_BOUNDS = {
+    "width": (1.0, MAX_IMAGE_SIDE_PX, "px"),
+    "height": (1.0, MAX_IMAGE_SIDE_PX, "px"),
+    "fx": (1.0, MAX_FOCAL_PX, "px"),
+    "fy": (1.0, MAX_FOCAL_PX, "px"),
+    "cx": (-MAX_FOCAL_PX, MAX_FOCAL_PX, "px"),
+    "cy": (-MAX_FOCAL_PX, MAX_FOCAL_PX, "px"),
+}
+
 #: (xd, yd, J_d_n) where J_d_n is (N, 2, 2), or None: not asked for, or the identity.
 Distorted = tuple[FloatArray, FloatArray, FloatArray | None]
 
@@ -52,6 +66,9 @@ class _Pinhole:
         }
         for name in ("cx", "cy", *self._COEFFS):
             values[name] = _fields.finite_float(getattr(self, name), f"{kind}.{name}")
+        for name, value in values.items():
+            low, high, unit = _BOUNDS.get(name, (-MAX_COEFFICIENT, MAX_COEFFICIENT, ""))
+            _fields.bounded(float(value), f"{kind}.{name}", low, high, unit)  # type: ignore[arg-type]
         for name, value in values.items():
             object.__setattr__(self, name, value)
         t_max, max_radius = self._limits()

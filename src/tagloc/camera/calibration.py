@@ -15,6 +15,7 @@ from tagloc.camera import _fields
 from tagloc.camera.equidistant import PinholeEquidistant
 from tagloc.camera.model import CameraModel
 from tagloc.camera.radtan import PinholeRadtan
+from tagloc.config import short_repr
 from tagloc.errors import CameraModelError
 
 _ROS_SUPPORTED = "supported: plumb_bob, equidistant"
@@ -61,8 +62,8 @@ def _check_full_frame(info: Mapping[str, Any], name: str, width: int, height: in
         binning = info.get(key, 0)
         if binning not in (0, 1):
             raise CameraModelError(
-                f"{name}.{key}: binning {binning!r} is not supported; use the full-resolution "
-                f"CameraInfo and camera.scaled(1 / binning)"
+                f"{name}.{key}: binning {short_repr(binning)} is not supported; use the "
+                f"full-resolution CameraInfo and camera.scaled(1 / binning)"
             )
     roi = info.get("roi")
     if roi is None:
@@ -120,7 +121,9 @@ def from_camera_info(info: Mapping[str, Any], name: str = "camera_info") -> Came
             f"{name}.distortion_model: 'rational_polynomial' (8 coefficients, k4..k6 in a "
             f"denominator) is not supported; {_ROS_SUPPORTED}"
         )
-    raise CameraModelError(f"{name}.distortion_model: unknown model {model!r}; {_ROS_SUPPORTED}")
+    raise CameraModelError(
+        f"{name}.distortion_model: unknown model {short_repr(model)}; {_ROS_SUPPORTED}"
+    )
 
 
 def from_kalibr(entry: Mapping[str, Any], name: str = "cam0") -> CameraModel:
@@ -153,7 +156,7 @@ def from_kalibr(entry: Mapping[str, Any], name: str = "cam0") -> CameraModel:
     camera_model = _fields.get(entry, ("camera_model",), name)
     if camera_model != "pinhole":
         raise CameraModelError(
-            f"{name}.camera_model: {camera_model!r} is not supported (expected 'pinhole')"
+            f"{name}.camera_model: {short_repr(camera_model)} is not supported (expected 'pinhole')"
         )
     where = f"{name}.intrinsics"
     fu, fv, pu, pv = _fields.float_list(
@@ -169,7 +172,7 @@ def from_kalibr(entry: Mapping[str, Any], name: str = "cam0") -> CameraModel:
     model = _fields.get(entry, ("distortion_model",), name)
     if model not in ("radtan", "equidistant", "none"):
         raise CameraModelError(
-            f"{name}.distortion_model: {model!r} is not supported; {_KALIBR_SUPPORTED}"
+            f"{name}.distortion_model: {short_repr(model)} is not supported; {_KALIBR_SUPPORTED}"
         )
     coeffs = entry.get("distortion_coeffs", []) if model == "none" else None
     if coeffs is None:

@@ -6,7 +6,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tagloc.eval.metrics import TrajectoryError, absolute_trajectory_error, endpoint_drift
+from tagloc.eval.metrics import (
+    EvaluationError,
+    TrajectoryError,
+    absolute_trajectory_error,
+    endpoint_drift,
+)
 from tagloc.sim import Drive
 
 
@@ -16,7 +21,8 @@ class DriveSummary:
 
     ``odom_ate`` is unaligned (``odom`` coincides with ``map`` at the start, so this is the error a
     planner reading ``odom`` as ``map`` would see); ``odom_ate_aligned`` removes the best rigid
-    alignment first, the number SLAM papers quote.
+    alignment first, the number SLAM papers quote (a straight route cannot be aligned: then it is
+    the unaligned error, with ``aligned`` False).
     """
 
     length_m: float
@@ -35,6 +41,13 @@ def summarize_drive(drive: Drive) -> DriveSummary:
     """Compare the drive's odometry with its ground truth (evo computes the ATE)."""
     length_m = float(drive.distance_m[-1])
     drift_m, drift_yaw = endpoint_drift(drive.T_map_base, drive.T_odom_base)
+    odom_ate = absolute_trajectory_error(drive.stamps_ns, drive.T_map_base, drive.T_odom_base)
+    try:
+        odom_ate_aligned = absolute_trajectory_error(
+            drive.stamps_ns, drive.T_map_base, drive.T_odom_base, align=True
+        )
+    except EvaluationError:  # a straight route: no rotation about it is observable
+        odom_ate_aligned = odom_ate
     return DriveSummary(
         length_m=length_m,
         duration_s=float(drive.stamps_ns[-1] - drive.stamps_ns[0]) * 1e-9,
@@ -44,8 +57,6 @@ def summarize_drive(drive: Drive) -> DriveSummary:
         endpoint_drift_m=drift_m,
         endpoint_yaw_drift_deg=float(np.degrees(drift_yaw)),
         drift_percent=100.0 * drift_m / max(length_m, 1e-9),
-        odom_ate=absolute_trajectory_error(drive.stamps_ns, drive.T_map_base, drive.T_odom_base),
-        odom_ate_aligned=absolute_trajectory_error(
-            drive.stamps_ns, drive.T_map_base, drive.T_odom_base, align=True
-        ),
+        odom_ate=odom_ate,
+        odom_ate_aligned=odom_ate_aligned,
     )

@@ -75,9 +75,11 @@ def absolute_trajectory_error(
     Raises
     ------
     EvaluationError
-        Lengths differ, stamps are not strictly increasing, or poses are not finite.
+        Lengths differ, stamps are not strictly increasing, poses are not finite, or ``align``
+        is asked of a reference whose positions are degenerate (a point or a straight line).
     """
     from evo.core import metrics
+    from evo.core.geometry import GeometryException
 
     stamps = np.asarray(stamps_ns)
     if len(T_map_base_ref) != len(stamps) or len(T_map_base_est) != len(stamps):
@@ -90,7 +92,13 @@ def absolute_trajectory_error(
     traj_ref = _to_evo(stamps, T_map_base_ref, "reference")
     traj_est = _to_evo(stamps, T_map_base_est, "estimate")
     if align:
-        traj_est.align(traj_ref)  # type: ignore[attr-defined]
+        try:
+            traj_est.align(traj_ref)  # type: ignore[attr-defined]
+        except GeometryException:
+            raise EvaluationError(
+                "cannot align the estimate: the reference positions are degenerate (a single "
+                "point or a straight line); evaluate without alignment"
+            ) from None
     ape = metrics.APE(metrics.PoseRelation.translation_part)
     ape.process_data((traj_ref, traj_est))
     errors = np.asarray(ape.error, dtype=np.float64)

@@ -14,15 +14,13 @@ from __future__ import annotations
 
 import math
 import os
-from pathlib import Path
 from typing import Any, Literal
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator
 
 from tagloc.camera import PinholeRadtan
-from tagloc.config import parse_yaml_mapping, validate
-from tagloc.errors import ConfigError
+from tagloc.config import parse_yaml_mapping, read_text_file, validate
 from tagloc.fileutil import atomic_write_text
 from tagloc.sim.render_config import RenderConfig
 from tagloc.tags.covariance import NoiseModel
@@ -192,10 +190,7 @@ def load_tag_sweep_config(path: str | os.PathLike[str]) -> TagSweepConfig:
         One line ``file: field.path: problem``, or the file cannot be read.
     """
     source = str(path)
-    try:
-        text = Path(path).read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ConfigError(f"{source}: cannot read: {exc.strerror or exc}") from None
+    text = read_text_file(path, "sweep config")
     return validate(TagSweepConfig, parse_yaml_mapping(text, source), source)
 
 

@@ -43,7 +43,6 @@ import contextlib
 import hashlib
 import logging
 import os
-import shutil
 import tempfile
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
@@ -59,6 +58,9 @@ from tagloc.tags.families import family_spec
 logger = logging.getLogger(__name__)
 
 OnBad = Literal["skip", "error"]
+#: A ``.bz2`` bag may decompress to at most this many times its size (or 64 MiB), so a small
+#: crafted file cannot fill the disk; real bags compress by far less.
+MAX_BZ2_RATIO = 200
 _KINDS = {".bag": "a ROS 1 bag", ".mcap": "an MCAP file", ".db3": "a ROS 2 sqlite3 file"}
 
 
@@ -129,10 +131,21 @@ def _decompressed(path: Path, cache_dir: str | os.PathLike[str] | None) -> Path:
     if target.is_file():
         return target
     logger.info("decompressing %s to %s", path, target)
+    limit = max(MAX_BZ2_RATIO * stat.st_size, 64 * 2**20)
     try:
         with atomic_path(target) as tmp, bz2.open(path, "rb") as src, tmp.open("wb") as dst:
-            shutil.copyfileobj(src, dst, 1 << 20)
-    except (OSError, EOFError) as exc:
+            written = 0
+            while chunk := src.read(1 << 20):
+                written += len(chunk)
+                if written > limit:
+                    raise BagFormatError(
+                        f"{path}: decompresses to more than {limit} bytes ({MAX_BZ2_RATIO} times "
+                        "its size); refusing it as a decompression bomb"
+                    )
+                dst.write(chunk)
+    except BagFormatError:
+        raise
+    except (OSError, EOFError, ValueError) as exc:
         raise BagFormatError(f"{path}: cannot decompress it to {target} ({exc})") from exc
     return target
 

@@ -12,10 +12,9 @@ import os
 from collections.abc import Mapping
 from pathlib import Path
 
-import yaml
-
 from tagloc.camera import CameraModel, from_kalibr
-from tagloc.errors import CameraModelError
+from tagloc.config import parse_yaml, read_text_file
+from tagloc.errors import CameraModelError, ConfigError
 
 
 def load_kalibr_cameras(path: str | os.PathLike[str]) -> dict[str, CameraModel]:
@@ -34,20 +33,17 @@ def load_kalibr_cameras(path: str | os.PathLike[str]) -> dict[str, CameraModel]:
     Raises
     ------
     CameraModelError
-        If the file cannot be read, is not YAML, is not a non-empty mapping of camera entries,
-        or an entry is invalid; the message starts with the path, then the field path
+        If the file cannot be read (or is larger than :data:`tagloc.config.MAX_YAML_BYTES`, or
+        not UTF-8), is not YAML, is not a non-empty mapping of camera entries, or an entry is
+        invalid; the message starts with the path, then the field path
         (``"cameras.yaml: cam0.distortion_coeffs: expected 4 values for equidistant, got 5"``).
     """
     path = Path(path)
+    text = read_text_file(path, "the camera file", error=CameraModelError)
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CameraModelError(f"{path}: cannot read the camera file ({exc})") from exc
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        detail = " ".join(str(exc).split())
-        raise CameraModelError(f"{path}: not valid YAML ({detail})") from exc
+        data = parse_yaml(text, str(path))
+    except ConfigError as exc:
+        raise CameraModelError(str(exc)) from None
     if not isinstance(data, Mapping) or not data:
         raise CameraModelError(
             f"{path}: expected a mapping of camera names (cam0, cam1, ...) to Kalibr camera "

@@ -8,6 +8,9 @@ rounding), every other value with the shortest repr that reads back bit-exactly,
 ``w >= 0``, and a ``#`` header line. :func:`read_tum` also accepts other writers' files
 (``%.18e`` from evo, 4 decimals from the TUM benchmark): any whitespace, timestamps in any decimal
 or exponent notation (converted to ns exactly), quaternions renormalized within ``quat_tol``.
+It refuses what would overflow later: files over :data:`MAX_TUM_BYTES`, positions beyond
+:data:`MAX_POSITION_M` (squared errors of 1e308 are ``inf``) and stamps past the int64 nanosecond
+range.
 """
 
 from __future__ import annotations
@@ -20,11 +23,17 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from tagloc.config import MAX_QUOTED_CHARS, read_text_file, short_repr
 from tagloc.fileutil import atomic_write_text
 from tagloc.geometry import SE3
 from tagloc.io.errors import InputNotFoundError, TrajectoryFileError
 
 Int64Array = npt.NDArray[np.int64]
+#: Largest trajectory file read, bytes (about 600 000 poses).
+MAX_TUM_BYTES = 64 * 2**20
+#: Largest accepted position coordinate, m (beyond any building or UTM zone; far from overflow).
+MAX_POSITION_M = 1e8
+_MAX_SECONDS = Decimal(np.iinfo(np.int64).max) / 1_000_000_000
 TUM_HEADER = "# timestamp[s] tx ty tz qx qy qz qw (tagloc: body pose in the trajectory frame)\n"
 
 
@@ -101,17 +110,17 @@ def read_tum(path: str | os.PathLike[str], *, quat_tol: float = 1e-3) -> tuple[I
     InputNotFoundError
         If ``path`` does not exist.
     TrajectoryFileError
-        ``"<path>: line <n>: ..."`` for a line without 8 numbers, a non-finite value, a negative
-        timestamp, a timestamp not after the previous one, or a quaternion off unit norm by more
-        than ``quat_tol``; or a file with no pose.
+        ``"<path>: line <n>: ..."`` for a line without 8 numbers, a non-finite value, a position
+        beyond :data:`MAX_POSITION_M`, a negative timestamp or one past the int64 nanosecond
+        range, a timestamp not after the previous one, or a quaternion off unit norm by more than
+        ``quat_tol``; or a file with no pose, larger than :data:`MAX_TUM_BYTES` or not UTF-8.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputNotFoundError(f"{path}: no such trajectory file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise TrajectoryFileError(f"{path}: cannot read the trajectory file ({exc})") from exc
+    if not path.exists():
+        raise InputNotFoundError(f"{path}: no such trajectory file")
+    text = read_text_file(
+        path, "the trajectory file", max_bytes=MAX_TUM_BYTES, error=TrajectoryFileError
+    )
     stamps: list[int] = []
     rows: list[list[float]] = []
     previous_line = 0
@@ -123,8 +132,8 @@ def read_tum(path: str | os.PathLike[str], *, quat_tol: float = 1e-3) -> tuple[I
         stamp, row = _parse(fields, where, quat_tol)
         if stamps and stamp <= stamps[-1]:
             raise TrajectoryFileError(
-                f"{where}: timestamp {fields[0]} is not after the one on line {previous_line} "
-                "(stamps must increase strictly)"
+                f"{where}: timestamp {_cut(fields[0])} is not after the one on line "
+                f"{previous_line} (stamps must increase strictly)"
             )
         stamps.append(stamp)
         rows.append(row)
@@ -146,16 +155,29 @@ def _parse(fields: list[str], where: str, quat_tol: float) -> tuple[int, list[fl
         seconds = Decimal(fields[0])
         values = [float(v) for v in fields[1:]]
     except (InvalidOperation, ValueError):
-        raise TrajectoryFileError(f"{where}: not a number among {fields}") from None
+        raise TrajectoryFileError(f"{where}: not a number among {short_repr(fields)}") from None
     if not seconds.is_finite() or not all(map(math.isfinite, values)):
-        raise TrajectoryFileError(f"{where}: NaN or infinite value among {fields}")
+        raise TrajectoryFileError(f"{where}: NaN or infinite value among {short_repr(fields)}")
     if seconds < 0:
-        raise TrajectoryFileError(f"{where}: negative timestamp {fields[0]}")
+        raise TrajectoryFileError(f"{where}: negative timestamp {_cut(fields[0])}")
+    if seconds > _MAX_SECONDS:
+        raise TrajectoryFileError(
+            f"{where}: timestamp {_cut(fields[0])} is past the int64 nanosecond range"
+        )
+    if (big := max(abs(v) for v in values[:3])) > MAX_POSITION_M:
+        raise TrajectoryFileError(
+            f"{where}: position coordinate {big:g} m is beyond {MAX_POSITION_M:g} m (tx ty tz)"
+        )
     norm = math.sqrt(sum(v * v for v in values[3:]))
     if abs(norm - 1.0) > quat_tol:
         raise TrajectoryFileError(
-            f"{where}: quaternion (qx qy qz qw) = {fields[4:]} is not unit: |q| = {norm:.9g} "
-            f"(tolerance {quat_tol:g})"
+            f"{where}: quaternion (qx qy qz qw) = {short_repr(fields[4:])} is not unit: "
+            f"|q| = {norm:.9g} (tolerance {quat_tol:g})"
         )
     stamp = int((seconds * 1_000_000_000).to_integral_value())
     return stamp, values[:3] + [v / norm for v in values[3:]]
+
+
+def _cut(text: str) -> str:
+    """``text`` as quoted in messages: at most :data:`tagloc.config.MAX_QUOTED_CHARS` characters."""
+    return text if len(text) <= MAX_QUOTED_CHARS else text[: MAX_QUOTED_CHARS - 3] + "..."

@@ -24,13 +24,12 @@ from typing import Annotated, Literal
 import yaml
 from pydantic import Field
 
-from tagloc.config import StrictModel, parse_yaml_mapping, validate
-from tagloc.errors import ConfigError
+from tagloc.config import StrictModel, parse_yaml_mapping, read_text_file, validate
 from tagloc.fileutil import atomic_write_text
 from tagloc.localize.config_tags import FramesConfig, GatesConfig, TagSensorConfig
 from tagloc.supervise import SupervisorConfig
 
-_Sigma = Annotated[float, Field(ge=0)]
+_Sigma = Annotated[float, Field(ge=0, le=1e3)]
 #: Standard deviations per axis ``[x, y, z, rx, ry, rz]``, each ``>= 0``.
 SigmaVec6 = tuple[_Sigma, _Sigma, _Sigma, _Sigma, _Sigma, _Sigma]
 
@@ -48,8 +47,9 @@ class ProcessNoiseConfig(StrictModel):
     sigma_per_sqrt_rad: SigmaVec6 = (0.02, 0.02, 0.005, 0.005, 0.005, 0.03)
     #: Small time term: keeps the covariance from collapsing while the robot stands still.
     sigma_per_sqrt_s: SigmaVec6 = (0.002, 0.002, 0.002, 0.001, 0.001, 0.001)
-    #: Resolution of the odometry path integral (path length and the frame of the noise).
-    motion_step_s: float = Field(0.1, gt=0)
+    #: Resolution of the odometry path integral (path length and the frame of the noise); finer
+    #: than 5 ms is finer than any odometry and only costs time.
+    motion_step_s: float = Field(0.1, ge=0.005, le=10.0)
     #: The odometry message's own pose covariance: ``ignore`` it (default: drivers often publish
     #: a constant), or add its ``growth`` between consecutive messages (the positive part of
     #: ``cov_k - cov_{k-1}``, in the odometry frame, ROS order ``[x, y, z, rx, ry, rz]``) to the
@@ -82,7 +82,7 @@ class CalibrationConfig(StrictModel):
 class CapConfig(StrictModel):
     """Largest jump of the published ``map -> base`` (at the robot's pose) per update."""
 
-    max_translation_m: float = Field(0.25, gt=0)
+    max_translation_m: float = Field(0.25, gt=0, le=1e6)
     max_rotation_deg: float = Field(5.0, gt=0, le=180)
     #: Publish the new correction at once on (re)initialization (a declared re-localization)
     #: instead of walking to it at the capped rate.
@@ -90,8 +90,8 @@ class CapConfig(StrictModel):
     #: Speed limit of the published correction at the robot's pose, m/s and deg/s (beside the
     #: per-update cap: a stream of accepted fixes cannot walk the correction faster than this;
     #: the remainder is carried). None: no limit.
-    max_speed_m_s: float | None = Field(None, gt=0)
-    max_rate_deg_s: float | None = Field(None, gt=0)
+    max_speed_m_s: float | None = Field(None, gt=0, le=1e3)
+    max_rate_deg_s: float | None = Field(None, gt=0, le=1e5)
 
 
 class OutputConfig(StrictModel):
@@ -112,35 +112,35 @@ class KidnapConfig(StrictModel):
 
     enabled: bool = True
     #: Gated fixes, mutually consistent, with no accepted fix between them, that re-initialize.
-    n_fixes: int = Field(4, ge=2)
+    n_fixes: int = Field(4, ge=2, le=100_000)
     #: Distinct sources among them: one tag alone cannot tell a kidnap from a moved tag.
-    min_sources: int = Field(2, ge=1)
+    min_sources: int = Field(2, ge=1, le=100_000)
     #: The n fixes must lie within this window.
-    window_s: float = Field(5.0, gt=0)
+    window_s: float = Field(5.0, gt=0, le=1e6)
     #: Or this many such fixes of a single source (0: never from one tag alone), each putting
     #: the robot at least ``one_source_min_jump_m`` from where the filter thinks it is. After a
     #: kidnap often one tag is in view: one tag seen for half a second (15 frames at 30 Hz)
     #: re-localizes. The distance rule keeps a tag moved since the survey (by less than that)
     #: from re-localizing the robot when seen alone; seen with other tags it is flagged suspect
     #: after ``suspect.min_gated`` fixes, long before this.
-    n_fixes_one_source: int = Field(15, ge=0)
-    one_source_min_jump_m: float = Field(1.0, ge=0)
+    n_fixes_one_source: int = Field(15, ge=0, le=100_000)
+    one_source_min_jump_m: float = Field(1.0, ge=0, le=1e6)
 
 
 class SuspectConfig(StrictModel):
     """Flag a source (a moved tag) whose fixes are gated while other sources are accepted."""
 
     #: Consecutive gated fixes of the source, with another source accepted meanwhile.
-    min_gated: int = Field(3, ge=1)
+    min_gated: int = Field(3, ge=1, le=100_000)
     #: Consecutive fixes of a suspect source that pass the gate (not applied) to clear it.
-    clear_after: int = Field(10, ge=1)
+    clear_after: int = Field(10, ge=1, le=100_000)
     #: Consecutive gated fixes count as "wrong the same way" only if the corrections they imply
     #: agree within this (m, and deg below): a moved tag repeats its pose to centimetres, while
     #: glints decoded under its id are vague (metres of covariance) and pass a chi-square pair
     #: test for that reason alone. Two gated fixes are compared only if they are at most
     #: ``kidnap.window_s`` apart (the same window the kidnap test uses).
-    max_spread_m: float = Field(0.3, gt=0)
-    max_spread_deg: float = Field(5.0, gt=0)
+    max_spread_m: float = Field(0.3, gt=0, le=1e6)
+    max_spread_deg: float = Field(5.0, gt=0, le=180)
 
 
 class FilterConfig(StrictModel):
@@ -153,13 +153,13 @@ class FilterConfig(StrictModel):
     #: ``relinearize_tol`` (m or rad). Skipping it errs by about ``|H dx| |nu| / 2``: under
     #: 1-2 mm for steps below 5 cm, far under fix noise; larger steps (start-up, after a gap or
     #: a kidnap, a poor prior) iterate.
-    max_iterations: int = Field(3, ge=1)
-    relinearize_tol: float = Field(0.05, gt=0)
+    max_iterations: int = Field(3, ge=1, le=20)
+    relinearize_tol: float = Field(0.05, gt=0, le=1e6)
     #: Published corrections kept for ``correction_at``.
-    history_size: int = Field(10_000, ge=1)
+    history_size: int = Field(10_000, ge=1, le=10_000_000)
     #: Events kept in the filter's log for inspection (counts are always exact; every event
     #: also streams to the node's sinks as it happens).
-    max_events: int = Field(1000, ge=1)
+    max_events: int = Field(1000, ge=1, le=10_000_000)
 
 
 class LocalizerConfig(StrictModel):
@@ -196,12 +196,7 @@ class LocalizerConfig(StrictModel):
 
 def load_localizer_config(path: str | os.PathLike[str]) -> LocalizerConfig:
     """Read and validate ``localizer.yaml``. Raises ``ConfigError`` (one line) on any problem."""
-    try:
-        with open(path, encoding="utf-8") as handle:
-            text = handle.read()
-    except OSError as exc:
-        message = f"{os.fspath(path)}: cannot read localizer config: {exc.strerror}"
-        raise ConfigError(message) from None
+    text = read_text_file(path, "localizer config")
     return LocalizerConfig.from_yaml_text(text, source=os.fspath(path))
 
 

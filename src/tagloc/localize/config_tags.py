@@ -34,9 +34,9 @@ class FramesConfig(StrictModel):
     """
 
     convention: Literal["ros", "dimos"] = "ros"
-    map_frame: str = Field("", description="default: the convention's (map)")
-    odom_frame: str = Field("", description="default: the convention's (odom, or world)")
-    base_frame: str = Field("", description="default: the convention's (base_link)")
+    map_frame: str = Field("", max_length=200, description="default: the convention's (map)")
+    odom_frame: str = Field("", max_length=200, description="default: the convention's (odom)")
+    base_frame: str = Field("", max_length=200, description="default: the convention's")
     #: The published edge: ``map_to_odom`` (parent map, child odom) or ``odom_to_map``
     #: (parent odom, child map: the inverse transform). Default: the convention's.
     publish: Literal["map_to_odom", "odom_to_map", ""] = ""
@@ -72,18 +72,18 @@ class GatesConfig(StrictModel, GateConfig):
 
     #: IPPE ambiguity ratio above which a fix is refused (None: no limit; the chi-square gate
     #: already refuses a flipped branch once the state is known).
-    max_ambiguity_ratio: float | None = Field(None, gt=0)
+    max_ambiguity_ratio: float | None = Field(None, gt=0, le=1e6)
     #: Chi-square quantile of the filter's Mahalanobis gate (dof 6, or 3 in planar mode): a
     #: consistent fix is wrongly gated once in 1 / (1 - q) fixes.
     chi2_quantile: float = Field(0.999, gt=0, lt=1)
     #: Mutually consistent fixes required at start-up and after a gap before any is applied.
-    k_consistent: int = Field(3, ge=1)
+    k_consistent: int = Field(3, ge=1, le=100_000)
     #: The k fixes must lie within this window, s.
-    consistency_window_s: float = Field(3.0, gt=0)
+    consistency_window_s: float = Field(3.0, gt=0, le=1e6)
     #: A gap (re-acquisition needs k consistent fixes again): no accepted fix for this long, s,
-    gap_s: float = Field(10.0, gt=0)
+    gap_s: float = Field(10.0, gt=0, le=1e6)
     #: ... or over this much travel, m.
-    gap_m: float = Field(5.0, gt=0)
+    gap_m: float = Field(5.0, gt=0, le=1e6)
 
     def observation_gates(self) -> GateConfig:
         """The per-observation part, as the tag layer takes it."""
@@ -100,18 +100,18 @@ class TagSensorConfig(StrictModel):
 
     #: Detector backend for images (``apriltag``: the AprilTag 3 library; ``aruco``: OpenCV).
     backend: Literal["apriltag", "aruco"] = "apriltag"
-    family: str = Field("tag36h11", min_length=1)
+    family: str = Field("tag36h11", min_length=1, max_length=64)
     #: One fix per tag (``single``) or one joint PnP fix per frame over >= 2 tags (``joint``).
     mode: Literal["single", "joint"] = "single"
     noise: NoiseModel = NoiseModel()
     #: Every fix covariance is multiplied by this.
-    cov_scale: float = Field(1.0, gt=0)
+    cov_scale: float = Field(1.0, gt=0, le=1e6)
     #: Floor on each translation (m) and rotation (rad) standard deviation of a fix.
-    min_cov_translation_m: float = Field(0.005, ge=0)
-    min_cov_rotation_rad: float = Field(0.002, ge=0)
+    min_cov_translation_m: float = Field(0.005, ge=0, le=1e3)
+    min_cov_rotation_rad: float = Field(0.002, ge=0, le=4)
     #: 1-sigma of the filter's orientation handed to the ambiguity policy, rad.
-    prior_rotation_sigma_rad: float = Field(0.05, gt=0)
+    prior_rotation_sigma_rad: float = Field(0.05, gt=0, le=4)
     #: The ambiguity evidence threshold while the filter has an estimate (None: the gates').
-    ambiguity_log_odds_with_prior: float | None = Field(9.2, ge=0)
+    ambiguity_log_odds_with_prior: float | None = Field(9.2, ge=0, le=1e6)
     #: Two detections whose corners all lie within this distance (px) are one quad.
-    shared_quad_px: float = Field(3.0, ge=0)
+    shared_quad_px: float = Field(3.0, ge=0, le=1e4)

@@ -17,6 +17,7 @@ are off by 88, 178 and 91 degrees.
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
@@ -24,7 +25,8 @@ import numpy as np
 import numpy.typing as npt
 
 from tagloc.camera import CameraModel
-from tagloc.config import parse_yaml_mapping
+from tagloc.config import clip_message, parse_yaml_mapping
+from tagloc.errors import TaglocError
 from tagloc.geometry import SE3
 from tagloc.mapping.survey import CameraFrame, MappingError, Survey, TagKey
 from tagloc.messages import Message, OdometryMsg, TagDetectionsMsg
@@ -67,7 +69,7 @@ def _pose(node: object, where: str) -> SE3:
     except (AssertionError, KeyError, TypeError, ValueError) as exc:
         raise MappingError(
             f"{where}: expected position {{x, y, z}} and rotation {{x, y, z}} (rotation vector, "
-            f"rad) ({type(exc).__name__}: {exc})"
+            f"rad) ({type(exc).__name__}: {clip_message(str(exc))})"
         ) from None
 
 
@@ -75,39 +77,67 @@ def parse_camera_poses(text: str, source: str) -> dict[str, SE3]:
     """``camera_poses.yaml`` (``camN: {pose: {position, rotation}}``) -> ``T_body_camN``."""
     data = parse_yaml_mapping(text, source)
     return {
-        str(name): _pose(entry.get("pose"), f"{source}: {name}.pose")
+        str(name): _pose(
+            entry.get("pose") if isinstance(entry, Mapping) else None, f"{source}: {name}.pose"
+        )
         for name, entry in data.items()
     }
 
 
 def parse_tagslam(text: str, source: str) -> RigConfig:
-    """Anchors (tags with a ``pose``), ``T_body_odom``, ignored ids and sizes of a tagslam.yaml."""
+    """Anchors (tags with a ``pose``), ``T_body_odom``, ignored ids and sizes of a tagslam.yaml.
+
+    Raises
+    ------
+    ConfigError
+        The text is not a YAML mapping (see :func:`tagloc.config.parse_yaml_mapping`).
+    MappingError
+        One line naming the body or tag whose layout or values are wrong (a size that is not a
+        positive number of metres included).
+    """
     data = parse_yaml_mapping(text, source)
     anchors: dict[int, SE3] = {}
     sizes: dict[int, float] = {}
     ignore: set[int] = set()
     T_body_odom, default_size = None, None
-    for b, body in enumerate(data.get("bodies") or []):
-        for name, spec in dict(body).items():
-            where = f"{source}: bodies[{b}].{name}"
-            if spec.get("odom_topic") is not None:
-                ignore |= {int(i) for i in spec.get("ignore_tags") or []}
-                if "T_body_odom" in spec:
-                    T_body_odom = _pose(spec["T_body_odom"], f"{where}.T_body_odom")
-            if spec.get("is_static"):
-                default_size = spec.get("default_tag_size", default_size)
-                for t, tag in enumerate(spec.get("tags") or []):
-                    sizes[int(tag["id"])] = float(tag.get("size", default_size))
-                    if "pose" in tag:
-                        anchors[int(tag["id"])] = _pose(tag["pose"], f"{where}.tags[{t}].pose")
+    where = f"{source}: bodies"
+    try:
+        for b, body in enumerate(data.get("bodies") or []):
+            for name, spec in dict(body).items():
+                where = f"{source}: bodies[{b}].{name}"
+                if spec.get("odom_topic") is not None:
+                    ignore |= {int(i) for i in spec.get("ignore_tags") or []}
+                    if "T_body_odom" in spec:
+                        T_body_odom = _pose(spec["T_body_odom"], f"{where}.T_body_odom")
+                if spec.get("is_static"):
+                    default_size = spec.get("default_tag_size", default_size)
+                    for t, tag in enumerate(spec.get("tags") or []):
+                        where = f"{source}: bodies[{b}].{name}.tags[{t}]"
+                        sizes[int(tag["id"])] = _size(tag.get("size", default_size), where)
+                        if "pose" in tag:
+                            anchors[int(tag["id"])] = _pose(tag["pose"], f"{where}.pose")
+        default_size = None if default_size is None else _size(default_size, where)
+    except TaglocError:
+        raise
+    except (AttributeError, KeyError, TypeError, ValueError, OverflowError) as exc:
+        detail = clip_message(f"{type(exc).__name__}: {exc}")
+        raise MappingError(f"{where}: not the tagSLAM layout ({detail})") from None
     return RigConfig(
         anchors,
         T_body_odom,
         frozenset(ignore),
-        None if default_size is None else float(default_size),
+        default_size,
         sizes,
         _tag_remaps(data.get("tag_id_remap") or [], f"{source}: tag_id_remap"),
     )
+
+
+def _size(value: object, where: str) -> float:
+    """A tag edge length, metres: a positive finite number."""
+    size = float(value)  # type: ignore[arg-type]  # TypeError/ValueError: reported by the caller
+    if not (math.isfinite(size) and size > 0):
+        raise MappingError(f"{where}: size {size} is not a positive number of metres")
+    return size
 
 
 def _tag_remaps(entries: object, where: str) -> tuple[TagRemap, ...]:
@@ -123,9 +153,10 @@ def _tag_remaps(entries: object, where: str) -> tuple[TagRemap, ...]:
                 if end < start:
                     raise MappingError(f"{where}[{i}].remaps[{j}]: end_time before start_time")
                 out.append(TagRemap(int(entry["id"]), int(r["remap_id"]), start, end))
-        except (KeyError, TypeError, ValueError) as exc:
+        except (KeyError, TypeError, ValueError, OverflowError) as exc:
             raise MappingError(f"{where}[{i}]: expected id and remaps of remap_id, start_time, "
-                               f"end_time ({exc.__class__.__name__}: {exc})") from None  # fmt: skip
+                               f"end_time ({exc.__class__.__name__}: "
+                               f"{clip_message(str(exc))})") from None  # fmt: skip
     return tuple(out)
 
 

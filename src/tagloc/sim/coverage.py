@@ -32,9 +32,11 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from tagloc.config import FieldPathError
 from tagloc.errors import SimulationError
 from tagloc.sim.drive import simulate_drive
 from tagloc.sim.observations import ObservationConfig, simulate_observations
+from tagloc.sim.route_budget import check_route_budget
 from tagloc.sim.world import World
 
 __all__ = ["CoverageGap", "RouteCoverage", "gaps_csv", "route_coverage"]
@@ -124,11 +126,19 @@ def route_coverage(
     Raises
     ------
     SimulationError
-        ``laps`` or ``stride`` below 1.
+        ``laps`` or ``stride`` below 1, or so many laps that the drive exceeds the limits of
+        :mod:`tagloc.sim.route_budget`.
     """
     if laps < 1 or stride < 1:
         raise SimulationError(f"coverage needs laps >= 1 and stride >= 1, got {laps}, {stride}")
-    world = world.model_copy(update={"route": world.route.model_copy(update={"repeat": laps})})
+    route = world.route.model_copy(update={"repeat": laps})
+    try:
+        check_route_budget(
+            route, world.checkpoints_xy(), world.robot.odom_rate_hz, world.robot.camera.rate_hz
+        )
+    except FieldPathError as exc:
+        raise SimulationError(f"{laps} laps: {exc}") from None
+    world = world.model_copy(update={"route": route})
     drive = simulate_drive(world, seed=0)
     stamps = drive.camera_stamps_ns[::stride]
     seen = [

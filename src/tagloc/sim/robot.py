@@ -5,7 +5,7 @@ The camera mount gives ``T_base_cam`` of the OpenCV optical frame (x right, y do
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import Field, field_validator, model_validator
@@ -15,7 +15,14 @@ from tagloc.config import FieldPathError, StrictModel, check_unit_quat
 from tagloc.geometry import SE3, SO3
 from tagloc.sim.odometry import OdometryConfig
 
-Vec3 = tuple[float, float, float]
+#: A mounting offset on the robot, metres.
+Offset = Annotated[float, Field(ge=-10.0, le=10.0)]
+Vec3 = tuple[Offset, Offset, Offset]
+Angle3 = tuple[
+    Annotated[float, Field(ge=-360.0, le=360.0)],
+    Annotated[float, Field(ge=-360.0, le=360.0)],
+    Annotated[float, Field(ge=-360.0, le=360.0)],
+]
 #: Camera body (x forward, y left, z up) to OpenCV optical frame (x right, y down, z forward).
 R_BODY_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 
@@ -23,8 +30,8 @@ R_BODY_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 class Intrinsics(StrictModel):
     """Pinhole intrinsics in pixels (OpenCV: centre of the top-left pixel at (0, 0))."""
 
-    fx: float = Field(gt=0.0)
-    fy: float = Field(gt=0.0)
+    fx: float = Field(ge=1.0, le=1e5)
+    fy: float = Field(ge=1.0, le=1e5)
     cx: float
     cy: float
     width: int = Field(gt=0, le=20000)
@@ -46,7 +53,9 @@ class Distortion(StrictModel):
     (OpenCV fisheye k1..k4)."""
 
     model: Literal["none", "radtan", "equidistant"] = "none"
-    coefficients: tuple[float, ...] = ()
+    coefficients: tuple[Annotated[float, Field(ge=-1e3, le=1e3)], ...] = Field(
+        default=(), max_length=5
+    )
 
     @model_validator(mode="after")
     def _count(self) -> Distortion:
@@ -69,7 +78,7 @@ class CameraMount(StrictModel):
 
     position: Vec3
     quat_xyzw: tuple[float, float, float, float] | None = None
-    rpy_deg: Vec3 | None = None
+    rpy_deg: Angle3 | None = None
 
     @field_validator("quat_xyzw")
     @classmethod

@@ -13,7 +13,13 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
 
+from tagloc.config import short_repr
+
 FloatArray = NDArray[np.float64]
+#: Largest coordinate of a world, metres (a building, not a planet).
+MAX_COORDINATE_M = 1e5
+#: Longest dwell at a waypoint, seconds.
+MAX_DWELL_S = 3600.0
 
 
 def _check_target(value: Any) -> Any:
@@ -24,12 +30,18 @@ def _check_target(value: Any) -> Any:
         isinstance(value, list | tuple)
         and len(value) == 2
         and all(
-            isinstance(c, int | float) and not isinstance(c, bool) and math.isfinite(c)
+            isinstance(c, int | float)
+            and not isinstance(c, bool)
+            and math.isfinite(c)
+            and abs(c) <= MAX_COORDINATE_M
             for c in value
         )
     ):
         return (float(value[0]), float(value[1]))
-    raise ValueError(f"expected a checkpoint name or [x, y] in metres, got {value!r}")
+    raise ValueError(
+        f"expected a checkpoint name or [x, y] in metres (|x|, |y| <= {MAX_COORDINATE_M:g}), "
+        f"got {short_repr(value)}"
+    )
 
 
 class Waypoint(BaseModel):
@@ -37,7 +49,7 @@ class Waypoint(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
     at: Annotated[str | tuple[float, float], BeforeValidator(_check_target)]
-    dwell: float | None = Field(default=None, ge=0.0)
+    dwell: float | None = Field(default=None, ge=0.0, le=MAX_DWELL_S)
 
     @model_validator(mode="before")
     @classmethod
@@ -50,12 +62,12 @@ class RouteConfig(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
     waypoints: tuple[Waypoint, ...] = Field(min_length=2)
-    speed: float = Field(gt=0.0, le=5.0)
-    accel_max: float = Field(default=0.5, gt=0.0)
-    yaw_rate_max: float = Field(default=0.8, gt=0.0, le=10.0)
-    yaw_accel_max: float = Field(default=1.5, gt=0.0)
-    corner_radius: float = Field(default=0.0, ge=0.0)
-    dwell: float = Field(default=0.0, ge=0.0)
+    speed: float = Field(ge=0.01, le=5.0)
+    accel_max: float = Field(default=0.5, ge=0.01, le=20.0)
+    yaw_rate_max: float = Field(default=0.8, ge=0.01, le=10.0)
+    yaw_accel_max: float = Field(default=1.5, ge=0.01, le=100.0)
+    corner_radius: float = Field(default=0.0, ge=0.0, le=100.0)
+    dwell: float = Field(default=0.0, ge=0.0, le=MAX_DWELL_S)
     repeat: int = Field(default=1, ge=1, le=100)
 
 

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import numpy.typing as npt
 
+from tagloc.config import short_repr
 from tagloc.errors import SimulationError
 from tagloc.geometry import SE3
 from tagloc.localize.config import LocalizerConfig
@@ -214,11 +215,18 @@ def build_scenario(
     Raises
     ------
     SimulationError
-        For an unknown name (the message lists the known ones).
+        For an unknown name (the message lists the known ones), or a ``duration_s`` that is not
+        a positive number.
     """
     spec = SCENARIOS.get(name)
     if spec is None:
-        raise SimulationError(f"unknown scenario {name!r} (known: {', '.join(SCENARIOS)})")
+        raise SimulationError(
+            f"unknown scenario {short_repr(name)} (known: {', '.join(SCENARIOS)})"
+        )
+    if duration_s is not None and not (math.isfinite(duration_s) and duration_s > 0):
+        raise SimulationError(
+            f"the duration must be a positive number of seconds, got {duration_s}"
+        )
     base = world or load_default_world()
     surveyed = base.model_copy(
         update={"tags": tuple(t for t in base.tags if t.id not in spec.remove_tags)}

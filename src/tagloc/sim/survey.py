@@ -17,7 +17,7 @@ import numpy.typing as npt
 from tagloc.mapping.builder import ProgressFn, build_tag_map
 from tagloc.mapping.config import MapBuildConfig, OdometryNoise
 from tagloc.mapping.report import BuildReport
-from tagloc.mapping.survey import CameraFrame, Survey
+from tagloc.mapping.survey import CameraFrame, MappingError, Survey
 from tagloc.sim.drive import Drive
 from tagloc.sim.observations import ObservationConfig, ObservedFrame, simulate_observations
 from tagloc.sim.odometry import DriftParameters, LeggedOdometryConfig, WheelOdometryConfig
@@ -127,12 +127,25 @@ def build_map_from_drive(
         Use every n-th camera frame.
     progress : callable, optional
         See :func:`tagloc.mapping.build_tag_map`.
+
+    Raises
+    ------
+    MappingError
+        No anchors are given and the drive detects no tag (a world without tags, or none along
+        the route).
     """
     observed = _observed(drive, observation_config, camera_stride)
     survey = _survey(drive, observed)
-    if anchors is None:  # the first tag truly detected (not an injected glint)
-        anchors = [next(s.tag_id for f in observed for s in f.truth if s.detected)]
     world = drive.world
+    if anchors is None:  # the first tag truly detected (not an injected glint)
+        first = next((s.tag_id for f in observed for s in f.truth if s.detected), None)
+        if first is None:
+            raise MappingError(
+                f"the simulated drive of world {world.name or '(unnamed)'} detects no tag "
+                f"({len(world.tags)} tags in the world): nothing to map; add tags along the route "
+                "(tagloc world coverage shows where the camera sees one)"
+            )
+        anchors = [first]
     T_map_anchor = {i: world.T_map_tag(world.find_tag(i)) for i in anchors}
     config = config or sim_build_config(drive, observation_config)
     return build_tag_map(survey, T_map_anchor, config, progress)

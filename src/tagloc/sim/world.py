@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 import os
 from importlib import resources
-from typing import Literal
+from typing import Annotated, Literal
 
 import numpy as np
 import yaml
@@ -27,16 +27,21 @@ from tagloc.config import (
     StrictModel,
     check_unit_quat,
     parse_yaml_mapping,
+    read_text_file,
+    short_repr,
     validate,
 )
-from tagloc.errors import ConfigError, SimulationError
+from tagloc.errors import SimulationError
 from tagloc.geometry import SE3, SO3
 from tagloc.sim.odometry import ODOMETRY_MODELS
 from tagloc.sim.robot import Robot
-from tagloc.sim.route import RouteConfig
+from tagloc.sim.route import MAX_COORDINATE_M, RouteConfig
+from tagloc.sim.route_budget import check_route_budget
 
-Vec2 = tuple[float, float]
-Vec3 = tuple[float, float, float]
+#: A coordinate in ``map`` or ``elevator_cab``, metres (a building, not a planet).
+Coordinate = Annotated[float, Field(ge=-MAX_COORDINATE_M, le=MAX_COORDINATE_M)]
+Vec2 = tuple[Coordinate, Coordinate]
+Vec3 = tuple[Coordinate, Coordinate, Coordinate]
 #: Codes per AprilTag family: valid ids are ``0 .. n - 1``.
 TAG_FAMILY_SIZES = {
     "tag36h11": 587,
@@ -97,8 +102,8 @@ class TagPose(StrictModel):
 class WallMount(StrictModel):
     """Upright tag on a wall: centre ``(x, y, height)``, horizontal face normal at ``yaw_deg``."""
 
-    x: float
-    y: float
+    x: Coordinate
+    y: Coordinate
     yaw_deg: float = Field(ge=-360.0, le=360.0)
     height: float = Field(gt=0.0, le=20.0)
 
@@ -147,8 +152,8 @@ class Tag(StrictModel):
 class PlanarPose(StrictModel):
     """``x``, ``y`` (m) and ``yaw_deg`` of a frame in ``map`` (z = 0, level)."""
 
-    x: float
-    y: float
+    x: Coordinate
+    y: Coordinate
     yaw_deg: float = Field(default=0.0, ge=-360.0, le=360.0)
 
 
@@ -163,13 +168,13 @@ class Elevator(StrictModel):
     footprint: tuple[float, float]
     door_side: Literal["+x", "-x", "+y", "-y"] = "+x"
     door_width: float = Field(default=1.0, gt=0.0)
-    height: float = Field(default=2.3, gt=0.0)
+    height: float = Field(default=2.3, gt=0.0, le=20.0)
     wall_material: Literal["wall", "glass", "mirror"] = "wall"
 
     @model_validator(mode="after")
     def _check(self) -> Elevator:
-        if min(self.footprint) <= 0:
-            raise FieldPathError(("footprint",), "sizes must be > 0")
+        if min(self.footprint) <= 0 or max(self.footprint) > 100.0:
+            raise FieldPathError(("footprint",), "sizes must be > 0 and <= 100 m")
         along = self.footprint[1] if self.door_side[1] == "x" else self.footprint[0]
         if self.door_width >= along:
             raise FieldPathError(
@@ -209,9 +214,9 @@ class Elevator(StrictModel):
 class Checkpoint(StrictModel):
     """A named floor position (m) in ``map``."""
 
-    name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")
-    x: float
-    y: float
+    name: str = Field(min_length=1, max_length=200, pattern=r"^[A-Za-z0-9_.-]+$")
+    x: Coordinate
+    y: Coordinate
     note: str | None = None
 
 
@@ -219,7 +224,7 @@ class World(StrictModel):
     """A simulated building and the robot that drives through it (see the module docstring)."""
 
     version: Literal[1]
-    name: str = ""
+    name: str = Field(default="", max_length=200)
     walls: tuple[Wall, ...] = ()
     tags: tuple[Tag, ...] = ()
     elevator: Elevator | None = None
@@ -259,8 +264,17 @@ class World(StrictModel):
                 known = ", ".join(list(names)[:12]) + (", ..." if len(names) > 12 else "")
                 raise FieldPathError(
                     ("route", "waypoints", j),
-                    f"unknown checkpoint {wp.at!r} (known: {known or 'none'})",
+                    f"unknown checkpoint {short_repr(wp.at)} (known: {known or 'none'})",
                 )
+        return self
+
+    @model_validator(mode="after")
+    def _drivable(self) -> World:
+        """Every later command drives the route: refuse one that cannot be driven affordably."""
+        robot = self.robot
+        check_route_budget(
+            self.route, self.checkpoints_xy(), robot.odom_rate_hz, robot.camera.rate_hz
+        )
         return self
 
     def checkpoints_xy(self) -> dict[str, Vec2]:
@@ -317,11 +331,7 @@ class World(StrictModel):
 
 def load_world(path: str | os.PathLike[str]) -> World:
     """Read and validate a world file. Raises ``ConfigError`` (one line) on any problem."""
-    try:
-        with open(path, encoding="utf-8") as handle:
-            text = handle.read()
-    except OSError as exc:
-        raise ConfigError(f"{os.fspath(path)}: cannot read world file: {exc.strerror}") from None
+    text = read_text_file(path, "world file")
     return World.from_yaml_text(text, source=os.fspath(path))
 
 

@@ -40,7 +40,16 @@ import pydantic
 import yaml
 from pydantic import Field, field_validator
 
-from tagloc.config import FieldPathError, StrictModel, check_unit_quat, one_line, parse_yaml_mapping
+from tagloc.config import (
+    FieldPathError,
+    StrictModel,
+    check_unit_quat,
+    clip_message,
+    one_line,
+    parse_yaml_mapping,
+    read_text_file,
+    short_repr,
+)
 from tagloc.errors import ConfigError, TaglocError
 from tagloc.fileutil import atomic_write_text
 from tagloc.geometry import SE3
@@ -51,6 +60,8 @@ DEFAULT_FAMILY = "tag36h11"
 MAP_FRAME = "map"
 #: Sanity bounds: sizes in [1 mm, 5 m] catch millimetres typed as metres; coordinates +-100 km.
 MIN_TAG_SIZE_M, MAX_TAG_SIZE_M, MAX_COORD_M = 1e-3, 5.0, 1e5
+#: Largest covariance entry of a tag pose (m^2, rad^2): beyond it, products overflow downstream.
+MAX_COVARIANCE = 1e4
 _FRAME_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_./-]*")
 _AXES = ("x", "y", "z", "rx", "ry", "rz")
 _INFLATIONS = (0.0, 1e-3, 3e-3, 1e-2, 3e-2, 1e-1)
@@ -121,7 +132,7 @@ class TagEntry(StrictModel):
             raise ValueError(f"must be 6 rows of 6 numbers or 36 numbers, got {len(value)} items")
         for i, row in enumerate(value):
             if not isinstance(row, list | tuple) or len(row) != 6:
-                raise FieldPathError((i,), f"must be a row of 6 numbers, got {row!r}")
+                raise FieldPathError((i,), f"must be a row of 6 numbers, got {short_repr(row)}")
         return value
 
     @pydantic.model_validator(mode="after")
@@ -320,12 +331,7 @@ class TagMap:
 
 def load_tag_map(path: str | os.PathLike[str]) -> TagMap:
     """Read and validate a tag map file. Raises :class:`TagMapError` (one line)."""
-    try:
-        with open(path, encoding="utf-8") as handle:
-            text = handle.read()
-    except (OSError, UnicodeDecodeError) as exc:
-        reason = getattr(exc, "strerror", None) or str(exc)
-        raise TagMapError(f"{os.fspath(path)}: cannot read tag map: {reason}") from None
+    text = read_text_file(path, "tag map", error=TagMapError)
     return TagMap.from_yaml_text(text, source=os.fspath(path))
 
 
@@ -349,6 +355,7 @@ def _validated(model: type[ModelT], data: dict[str, Any], source: str) -> ModelT
         loc, message = list(first["loc"]), first["msg"].removeprefix("Value error, ")
         if isinstance(error := first.get("ctx", {}).get("error"), FieldPathError):
             loc, message = loc + list(error.path), str(error)
+        message = clip_message(message)
         parts = [source]
         if len(loc) > 1 and loc[0] == "tags" and isinstance(loc[1], int):
             tags = data.get("tags")
@@ -370,7 +377,7 @@ def _entry_problem(tag: TagEntry) -> tuple[Path_, str] | None:
     if tag.id < 0 or (tag.observations or 0) < 0:
         return ("id" if tag.id < 0 else "observations",), "must be >= 0"
     if tag.family not in FAMILIES:
-        return ("family",), f"unknown family {tag.family!r}; known: {', '.join(FAMILIES)}"
+        return ("family",), f"unknown family {short_repr(tag.family)}; known: {', '.join(FAMILIES)}"
     if tag.id >= num_ids:
         return ("id",), f"{tag.id} is out of range for {tag.family} (0..{num_ids - 1})"
     if tag.size <= 0:
@@ -379,7 +386,7 @@ def _entry_problem(tag: TagEntry) -> tuple[Path_, str] | None:
         bounds = f"[{MIN_TAG_SIZE_M:g}, {MAX_TAG_SIZE_M:g}]"
         return ("size",), f"{tag.size:g} is outside {bounds}: sizes are metres, not millimetres"
     if not _FRAME_NAME.fullmatch(tag.frame):
-        return ("frame",), f"bad frame name {tag.frame!r} (letters, digits, _ . / -)"
+        return ("frame",), f"bad frame name {short_repr(tag.frame)} (letters, digits, _ . / -)"
     for k, coordinate in enumerate(tag.position):
         if abs(coordinate) > MAX_COORD_M:
             return ("position", k), f"{coordinate:g} m is beyond +-{MAX_COORD_M:g} m"
@@ -395,6 +402,9 @@ def _covariance_problem(cov: npt.NDArray[np.float64]) -> tuple[Path_, str] | Non
     PSD is tested on the correlation matrix (units cancel): its least eigenvalue >= -1e-9.
     """
     variances = np.diag(cov)
+    if (big := float(np.abs(cov).max())) > MAX_COVARIANCE:
+        row, col = divmod(int(np.argmax(np.abs(cov))), 6)
+        return (row, col), f"{big:.3g} is beyond {MAX_COVARIANCE:g} (a 100 m or rad sigma)"
     for i, j in itertools.combinations_with_replacement(range(6), 2):
         a, b = cov[i, j], cov[j, i]
         if i == j and a < 0:
