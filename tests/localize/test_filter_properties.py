@@ -20,7 +20,6 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
-import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 from test_localize_sim import Drive, S, make_filter, make_fix, simulate
@@ -172,12 +171,6 @@ def test_random_fix_sequences_keep_the_filter_sane_and_the_jumps_capped(
         event(f"{kind.value} events: {'none' if count == 0 else 'some'}")
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="CorrectionPublisher._clip rebuilds the clipped correction with transpose-inverses of "
-    "matrices that hold the previous (clipped) publication: its rotation's non-orthogonality "
-    "about triples per capped publication",
-)
 def test_published_correction_stays_a_rotation_while_walking_at_the_cap() -> None:
     drive = _drive(0)
     buffer = TransformBuffer(window_ns=1000 * S)

@@ -157,4 +157,6 @@ class CorrectionPublisher:
             f"{math.degrees(angle):.2f} deg",
         )
         out: Pose = X_A @ rest.inverse() @ A.inverse()  # type: ignore[operator]
+        if isinstance(out, SE3):  # the products carry the last clipped publication: project
+            out = SE3(rotation=out.rotation.normalized(), translation=out.translation)
         return out
