@@ -1,4 +1,4 @@
-"""The report's ATE equals evo's own command line on the exported TUM files (issue 4).
+"""The report's ATE equals evo's own command line on the exported TUM files.
 
 Runs ``evo_ape tum truth.tum <estimate>.tum`` (the evo console script installed beside this
 Python) with a temporary HOME (evo writes its settings there) and the Agg backend, and compares

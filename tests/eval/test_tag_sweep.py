@@ -1,7 +1,7 @@
 """The tag-sensor sweep (``tagloc eval tags``) on rendered images, against simulator truth.
 
 Oracles: the renderer's ground truth (``TagTruth``: range, viewing angle, corners) for the sampled
-views; hand-built estimates for the flip rule and hand-computed statistics for a cell; the issue's
+views; hand-built estimates for the flip rule and hand-computed statistics for a cell; the
 accuracy targets on a tiny seeded sweep through the real detector; the CLI's files and exit codes.
 """
 
@@ -36,7 +36,7 @@ from tagloc.eval.tag_views import rotation_error_deg, sample_board_view, sample_
 from tagloc.sim import RenderConfig, render_tags_scene
 from tagloc.tags import TagDetection, estimate_tag_pose, tag_object_points
 
-#: 2 and 4 m (the issue's accuracy distances) at 15-60 deg, sharp, default sensor noise; joint
+#: 2 and 4 m (the accuracy distances) at 15-60 deg, sharp, default sensor noise; joint
 #: PnP over 2 and 4 tags face-on at 2 m.
 TINY = TagSweepConfig(
     distances_m=(2.0, 4.0), angles_deg=(15.0, 30.0, 60.0), blur_px=(0.0,), noise_dn=(1.5,),
@@ -136,7 +136,7 @@ def test_cell_row_statistics_by_hand() -> None:
 # ----- a tiny sweep through the renderer and the real detector ---------------------------------
 
 
-def test_tiny_sweep_meets_the_issues_targets(tiny: TagSweepResult) -> None:
+def test_tiny_sweep_meets_the_targets(tiny: TagSweepResult) -> None:
     assert len(tiny.rows) == 6 and tiny.n_views == 6 * 8 + 2 * 8
     for row in tiny.rows:
         # quad_decimate=2 loses some of the 25 px wide, 60 deg oblique tags at 4 m
@@ -151,7 +151,7 @@ def test_tiny_sweep_meets_the_issues_targets(tiny: TagSweepResult) -> None:
         assert at2.rotation_error_median_deg <= 1.0
     # Errors grow with distance. With sigma_px = 0.1 px the covariance is conservative at 2 m
     # and about honest at 4 m (seeds 3-5: NEES/dof 0.16-0.58 at 2 m, 0.38-3.5 at 4 m, pooled
-    # 0.6-0.9): the issue's band holds for the pooled mean, not cell by cell.
+    # 0.6-0.9): the band holds for the pooled mean, not cell by cell.
     for angle in (15.0, 30.0):
         assert (
             _row(tiny, 4.0, angle).position_error_median_m
@@ -174,7 +174,7 @@ def test_tiny_sweep_meets_the_issues_targets(tiny: TagSweepResult) -> None:
 
 
 def test_joint_pnp_on_rendered_images(tiny: TagSweepResult) -> None:
-    # The issue: joint PnP over >= 2 tags no worse than the best single tag, <= 1 deg face-on.
+    # Target: joint PnP over >= 2 tags no worse than the best single tag, <= 1 deg face-on.
     assert [(j.n_tags, j.distance_m) for j in tiny.joint_rows] == [(2, 2.0), (4, 2.0)]
     for j in tiny.joint_rows:
         assert j.n_views == 8 and j.joint_rate == 1.0  # face-on singles are ambiguous; joint is not

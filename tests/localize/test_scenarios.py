@@ -203,7 +203,7 @@ def test_full_length_scenarios(name: str) -> None:
     assert fused.largest_jump_m <= summary.cap_translation_m + 1e-9
     if name in ("default", "glint"):  # (a moved tag alone in view is rightly refused)
         assert fused.reliability is not None and fused.reliability.fraction >= 0.99
-    if name == "glint":  # issue 4: >= 1,000 injected, none accepted, >= 98 % of true ones
+    if name == "glint":  # >= 1,000 injected, none accepted, >= 98 % of true ones
         assert int(run.metadata["glints_injected"]) >= 1000  # type: ignore[call-overload]
         assert summary.fixes.true_in_range_acceptance >= 0.98
         assert run.metadata["suspect_sources"] == []

@@ -30,7 +30,7 @@ from tagloc.tags.pnp import (
 
 FloatArray = npt.NDArray[np.float64]
 
-#: The reference setup of the issue: 1280x720, 90 deg horizontal FOV (fx = 640), 0.16 m tags.
+#: The reference setup: 1280x720, 90 deg horizontal FOV (fx = 640), 0.16 m tags.
 CAMERA = PinholeRadtan(width=1280, height=720, fx=640.0, fy=640.0, cx=639.5, cy=359.5)
 #: The same with a real lens' distortion, for the OpenCV cross-checks.
 CAMERA_DISTORTED = PinholeRadtan(
@@ -265,7 +265,7 @@ def _accuracy(distance: float, angle_deg: float, sigma: float, n: int = 150) -> 
 @pytest.mark.parametrize("angle_deg", [15.0, 30.0, 60.0])
 def test_accuracy_targets_for_a_016_m_tag_at_1280x720(angle_deg: float) -> None:
     # AprilTag 3 corners on sharp images: ~0.1 px (measured numbers for 0.2-0.5 px in the
-    # issue note: position scales with sigma, so 0.3 px still meets the 2 m target).
+    # position scales with sigma, so 0.3 px still meets the 2 m target).
     pos2, rot2 = _accuracy(2.0, angle_deg, 0.1)
     pos4, _ = _accuracy(4.0, angle_deg, 0.1)
     assert pos2 <= 0.01

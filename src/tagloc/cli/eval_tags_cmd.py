@@ -32,7 +32,7 @@ def eval_tags(
     ] = None,
 ) -> None:
     """Sweep distance, viewing angle, blur and noise on rendered tag images; write the table
-    (CSV, markdown), the config and plots to OUT, print the table and the issue's checks."""
+    (CSV, markdown), the config and plots to OUT, print the table and the checks."""
     from rich.progress import Progress
 
     from tagloc.eval.tag_sweep import run_tag_sweep

@@ -26,7 +26,7 @@ from tagloc.localize.run import CameraFrameRecord, FixAttempt
 
 
 class EvalConfig(BaseModel):
-    """Thresholds of the evaluation (units in the names) and the issue's pass/fail targets."""
+    """Thresholds of the evaluation (units in the names) and the pass/fail targets."""
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 

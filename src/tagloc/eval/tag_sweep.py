@@ -16,7 +16,7 @@
    (:func:`is_ambiguity_flip`).
 
 Then, for joint PnP, face-on rows of 2 or more tags (:mod:`tagloc.eval.tag_sweep_joint`).
-Views come from :mod:`tagloc.eval.tag_views`; per-cell statistics and the issue's checks are in
+Views come from :mod:`tagloc.eval.tag_views`; per-cell statistics and the checks are in
 :mod:`tagloc.eval.tag_sweep_stats`; files (CSV, markdown, plots) in
 :mod:`tagloc.eval.tag_sweep_report`.
 """
@@ -80,7 +80,7 @@ class TagSweepResult:
     joint_rows : tuple of JointRow
         The face-on multi-tag cells (:mod:`tagloc.eval.tag_sweep_joint`), by tag count, distance.
     checks : tuple of Check
-        The issue's targets (:func:`tagloc.eval.tag_sweep_stats.sweep_checks`, then
+        The targets (:func:`tagloc.eval.tag_sweep_stats.sweep_checks`, then
         :func:`tagloc.eval.tag_sweep_joint.joint_checks`).
     detect_ms, rest_ms : float
         Median per-frame time of detection over every frame of the sweep, and of everything

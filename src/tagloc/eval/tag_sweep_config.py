@@ -2,7 +2,7 @@
 
 A sweep is every combination of ``distances_m x angles_deg x blur_px x noise_dn``, each cell
 ``trials`` seeded views of one tag (:mod:`tagloc.eval.tag_sweep`). The *reference condition*
-is the sharpest, least noisy combination (``min(blur_px)``, ``min(noise_dn)``): the issue's
+is the sharpest, least noisy combination (``min(blur_px)``, ``min(noise_dn)``): the
 accuracy targets are stated for it ("no blur").
 
 The file form (``tagloc eval tags --config sweep.yaml``) is the model's fields as a YAML mapping;
@@ -46,7 +46,7 @@ QUICK_GRID: dict[str, Any] = {
 
 
 class TagSweepTargets(BaseModel):
-    """The issue's targets, checked on a sweep result (:func:`tagloc.eval.tag_sweep.run_tag_sweep`).
+    """The targets, checked on a sweep result (:func:`tagloc.eval.tag_sweep.run_tag_sweep`).
 
     Accuracy targets apply to the reference condition; flips and NEES to the whole sweep.
     """

@@ -1,4 +1,4 @@
-"""Per-cell statistics of a tag-sensor sweep and the issue's checks (pure functions).
+"""Per-cell statistics of a tag-sensor sweep and the checks (pure functions).
 
 :class:`ViewOutcome` is one scored view (:mod:`tagloc.eval.tag_sweep`); :func:`cell_row` turns a
 cell's views into a :class:`TagSweepRow`; :func:`sweep_checks` tests the rows against
@@ -207,7 +207,7 @@ def _at_most(name: str, value: float, limit: float, unit: str) -> Check:
 
 
 def sweep_checks(config: TagSweepConfig, rows: Sequence[TagSweepRow]) -> list[Check]:
-    """The issue's targets on a sweep's rows (value NaN and ``passed`` None where the sweep has
+    """The targets on a sweep's rows (value NaN and ``passed`` None where the sweep has
     no cell to judge, e.g. no 2 m distance).
 
     - position error median at 2 m and at 4 m: the worst cell (every angle with an accepted
