@@ -3,7 +3,8 @@
 Order (top first): errors, fileutil, _yaml_loader, config; geometry; frames; camera; tags;
 messages; mapping; supervise; localize; sim; eval; io; adapters; cli. ``supervise`` sits above
 ``localize``: the supervisor's health and ladder policy are generic over fix sources, and the
-streaming node in ``localize`` drives it. Imports under ``if TYPE_CHECKING:`` count too (they are real coupling).
+streaming node in ``localize`` drives it. Imports under ``if TYPE_CHECKING:`` count too (they
+are real coupling).
 """
 
 from __future__ import annotations
