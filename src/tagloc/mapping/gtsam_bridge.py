@@ -3,15 +3,24 @@
 tagloc orders SE(3) tangents and covariances ``[x, y, z, rx, ry, rz]``; GTSAM's ``Pose3`` orders
 them ``[rx, ry, rz, x, y, z]``. Both perturb on the right (``T (+) d = T @ Exp(d)``), so a
 covariance only needs the block permutation :data:`PERM`.
+
+GTSAM reports an unsolvable graph with a ``RuntimeError`` (``IndeterminateSystemException`` and
+its kin); :func:`solver_errors` turns it into a one-line :class:`MappingError` where tagloc calls
+a solver.
 """
 
 from __future__ import annotations
+
+import contextlib
+import re
+from collections.abc import Iterator
 
 import gtsam
 import numpy as np
 import numpy.typing as npt
 
 from tagloc.geometry import SE3
+from tagloc.mapping.survey import MappingError
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -43,3 +52,34 @@ def diagonal_sigmas(sigmas: npt.ArrayLike) -> gtsam.noiseModel.Base:
     """A GTSAM diagonal noise model from tagloc-ordered ``(6,)`` standard deviations."""
     s = np.asarray(sigmas, dtype=np.float64)
     return gtsam.noiseModel.Diagonal.Sigmas(np.ascontiguousarray(s[PERM]))
+
+
+#: What each GTSAM key letter stands for in tagloc's graphs.
+_VARIABLES = {"x": "keyframe", "l": "tag", "c": "odometry calibration"}
+_SYMBOL = re.compile(r"Symbol: ([a-z])(\d+)")
+
+
+@contextlib.contextmanager
+def solver_errors(what: str) -> Iterator[None]:
+    """Turn a GTSAM solver failure inside the block into one line naming the variable at fault.
+
+    Raises
+    ------
+    MappingError
+        ``"cannot solve <what>: ..."``, for an under-constrained or ill-conditioned graph.
+    """
+    try:
+        yield
+    except RuntimeError as exc:
+        text = " ".join(str(exc).split())
+        if "ndeterminate" in text:
+            found = _SYMBOL.search(text)
+            near = f" near {_VARIABLES.get(found[1], 'variable')} {found[2]}" if found else ""
+            reason = (
+                f"the system is under-constrained or too poorly conditioned{near}; check the "
+                "camera extrinsics (--camera-poses), the anchors and that every tag is seen "
+                "from more than one place"
+            )
+        else:
+            reason = text[:200] or exc.__class__.__name__
+        raise MappingError(f"cannot solve {what}: {reason}") from None

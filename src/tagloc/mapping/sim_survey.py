@@ -17,7 +17,7 @@ import numpy.typing as npt
 from tagloc.mapping.builder import ProgressFn, build_tag_map
 from tagloc.mapping.config import MapBuildConfig, OdometryNoise
 from tagloc.mapping.report import BuildReport
-from tagloc.mapping.survey import CameraFrame, Survey
+from tagloc.mapping.survey import CameraFrame, MappingError, Survey
 from tagloc.sim.drive import Drive
 from tagloc.sim.observations import ObservationConfig, ObservedFrame, simulate_observations
 from tagloc.sim.odometry import DriftParameters, LeggedOdometryConfig, WheelOdometryConfig
@@ -127,11 +127,22 @@ def build_map_from_drive(
         Use every n-th camera frame.
     progress : callable, optional
         See :func:`tagloc.mapping.build_tag_map`.
+
+    Raises
+    ------
+    MappingError
+        No anchor given and no tag detected in the frames used; or from the map build.
     """
     observed = _observed(drive, observation_config, camera_stride)
     survey = _survey(drive, observed)
     if anchors is None:  # the first tag truly detected (not an injected glint)
-        anchors = [next(s.tag_id for f in observed for s in f.truth if s.detected)]
+        first = next((s.tag_id for f in observed for s in f.truth if s.detected), None)
+        if first is None:
+            raise MappingError(
+                f"no tag detected in the {len(observed)} camera frames used: nothing to map "
+                "(a world without tags in view of the route, or a camera stride too large)"
+            )
+        anchors = [first]
     world = drive.world
     T_map_anchor = {i: world.T_map_tag(world.find_tag(i)) for i in anchors}
     config = config or sim_build_config(drive, observation_config)
