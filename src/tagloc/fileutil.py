@@ -128,7 +128,7 @@ def check_outputs(
     directories = directories or {}
     replaceable = replaceable or {}
     resolved: dict[str, Path] = {}
-    claimed: list[tuple[Path, str, bool]] = []  # (path, option, written as one unit)
+    claimed: list[_Claim] = []
     for option, raw in outputs.items():
         if raw is None:
             continue
@@ -139,22 +139,25 @@ def check_outputs(
             children = [(name, path / name) for name in directories[option]]
             for name, child in children:
                 _check_file(option, Path(raw) / name, child, None)
-            claimed += [(child, option, True) for _, child in children]
-            claimed.append((path, option, False))
+            claimed += [(child, option, f"{raw}/{name}", True) for name, child in children]
+            claimed.append((path, option, str(raw), False))
         else:
             _check_file(option, raw, path, replaceable.get(option))
-            claimed.append((path, option, True))
-    _check_clashes(claimed, outputs)
+            claimed.append((path, option, str(raw), True))
+    _check_clashes(claimed)
     for name, raw_input in (inputs or {}).items():
         if raw_input is None:
             continue
         source = _resolve(name, raw_input)
-        for path, option, _ in claimed:
+        for path, option, shown, _ in claimed:
             if path == source:
-                raise OutputPathError(
-                    f"{option} {outputs[option]}: is also the input {name} {raw_input}"
-                )
+                raise OutputPathError(f"{option} {shown}: is also the input {name} {raw_input}")
     return resolved
+
+
+#: An output path: resolved, its option, as the user wrote it, written as one unit (not a directory
+#: the command fills).
+_Claim = tuple[Path, str, str, bool]
 
 
 def _resolve(option: str, raw: PathArg) -> Path:
@@ -203,24 +206,15 @@ def _check_parent(option: str, raw: PathArg, directory: Path) -> None:
     os.unlink(probe)
 
 
-def _check_clashes(
-    claimed: list[tuple[Path, str, bool]], outputs: Mapping[str, PathArg | None]
-) -> None:
-    """No two options write the same path, nor into an output that is replaced as a whole."""
-    for i, (path, option, _) in enumerate(claimed):
-        for other_path, other, other_whole in claimed[:i]:
+def _check_clashes(claimed: list[_Claim]) -> None:
+    """No two options write the same path, nor into an output that is written as one unit."""
+    for i, (path, option, shown, whole) in enumerate(claimed):
+        for other_path, other, other_shown, other_whole in claimed[:i]:
             if other == option:
                 continue
             if path == other_path:
-                raise OutputPathError(
-                    f"{option} {outputs[option]}: the same path as {other} {outputs[other]}"
-                )
-            for inner, inner_option, outer, outer_option, whole in (
-                (path, option, other_path, other, other_whole),
-                (other_path, other, path, option, claimed[i][2]),
-            ):
-                if whole and inner.is_relative_to(outer):
-                    raise OutputPathError(
-                        f"{inner_option} {outputs[inner_option]}: inside the output "
-                        f"{outer_option} {outputs[outer_option]}"
-                    )
+                raise OutputPathError(f"{option} {shown}: the same path as {other} {other_shown}")
+            if other_whole and path.is_relative_to(other_path):
+                raise OutputPathError(f"{option} {shown}: inside the output {other} {other_shown}")
+            if whole and other_path.is_relative_to(path):
+                raise OutputPathError(f"{other} {other_shown}: inside the output {option} {shown}")

@@ -42,16 +42,18 @@ def sim_record(
     ] = None,
 ) -> None:
     """Record a simulated scenario (odometry, tag detections, camera, truth) to a bag."""
-    from tagloc.cli.localize_cmd import write_stream_bag
     from tagloc.fileutil import atomic_write_text, check_outputs
     from tagloc.io import bag_output_format, check_bag_target, is_ros2_bag_directory
-    from tagloc.sim.scenarios import ScenarioSource, build_scenario
 
     bag_format = bag_output_format(out, format)
     tags_path = tags_out if tags_out is not None else out.parent / "tags.yaml"
     replaceable = {"--out": is_ros2_bag_directory} if bag_format == "ros2" else {}
     check_outputs({"--out": out, "--tags-out": tags_path}, replaceable=replaceable)
     check_bag_target(out, bag_format)
+
+    from tagloc.cli.localize_cmd import write_stream_bag
+    from tagloc.sim.scenarios import ScenarioSource, build_scenario
+
     built = build_scenario(scenario, seed, duration)
     source = ScenarioSource(built)
     tags_text = built.tag_map.to_yaml_text()

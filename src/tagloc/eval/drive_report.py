@@ -6,7 +6,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tagloc.eval.metrics import TrajectoryError, absolute_trajectory_error, endpoint_drift
+from tagloc.eval.metrics import (
+    EvaluationError,
+    TrajectoryError,
+    absolute_trajectory_error,
+    endpoint_drift,
+)
 from tagloc.sim import Drive
 
 
@@ -16,7 +21,8 @@ class DriveSummary:
 
     ``odom_ate`` is unaligned (``odom`` coincides with ``map`` at the start, so this is the error a
     planner reading ``odom`` as ``map`` would see); ``odom_ate_aligned`` removes the best rigid
-    alignment first, the number SLAM papers quote.
+    alignment first, the number SLAM papers quote (None if the drive is too short or straight
+    for a rigid alignment).
     """
 
     length_m: float
@@ -28,7 +34,7 @@ class DriveSummary:
     endpoint_yaw_drift_deg: float
     drift_percent: float
     odom_ate: TrajectoryError
-    odom_ate_aligned: TrajectoryError
+    odom_ate_aligned: TrajectoryError | None
 
 
 def summarize_drive(drive: Drive) -> DriveSummary:
@@ -45,7 +51,14 @@ def summarize_drive(drive: Drive) -> DriveSummary:
         endpoint_yaw_drift_deg=float(np.degrees(drift_yaw)),
         drift_percent=100.0 * drift_m / max(length_m, 1e-9),
         odom_ate=absolute_trajectory_error(drive.stamps_ns, drive.T_map_base, drive.T_odom_base),
-        odom_ate_aligned=absolute_trajectory_error(
-            drive.stamps_ns, drive.T_map_base, drive.T_odom_base, align=True
-        ),
+        odom_ate_aligned=_aligned_ate(drive),
     )
+
+
+def _aligned_ate(drive: Drive) -> TrajectoryError | None:
+    try:
+        return absolute_trajectory_error(
+            drive.stamps_ns, drive.T_map_base, drive.T_odom_base, align=True
+        )
+    except EvaluationError:  # a degenerate alignment: a static or straight drive
+        return None

@@ -75,7 +75,8 @@ def absolute_trajectory_error(
     Raises
     ------
     EvaluationError
-        Lengths differ, stamps are not strictly increasing, or poses are not finite.
+        Lengths differ, stamps are not strictly increasing, poses are not finite, or the
+        alignment is degenerate (a static or straight track).
     """
     from evo.core import metrics
 
@@ -90,9 +91,20 @@ def absolute_trajectory_error(
     traj_ref = _to_evo(stamps, T_map_base_ref, "reference")
     traj_est = _to_evo(stamps, T_map_base_est, "estimate")
     if align:
-        traj_est.align(traj_ref)  # type: ignore[attr-defined]
+        from evo.core.geometry import GeometryException
+
+        try:
+            traj_est.align(traj_ref)  # type: ignore[attr-defined]
+        except GeometryException as exc:
+            raise EvaluationError(
+                f"cannot align the estimate onto the reference ({exc}): the positions do not "
+                "span enough space (a static or straight track); evaluate it without alignment"
+            ) from None
     ape = metrics.APE(metrics.PoseRelation.translation_part)
-    ape.process_data((traj_ref, traj_est))
+    try:
+        ape.process_data((traj_ref, traj_est))
+    except metrics.MetricsException as exc:
+        raise EvaluationError(f"cannot compute the ATE: {exc}") from None
     errors = np.asarray(ape.error, dtype=np.float64)
     return TrajectoryError(
         rmse=float(np.sqrt(np.mean(errors**2))),
