@@ -19,6 +19,8 @@ from pathlib import Path
 from tagloc.errors import TaglocError
 
 PathArg = str | os.PathLike[str]
+#: Characters a temporary name adds to its target's name and suffix (``.``, ``.``, 8, ``.tmp``).
+_TEMP_EXTRA = 14
 
 
 class OutputPathError(TaglocError, ValueError):
@@ -134,21 +136,28 @@ def check_outputs(
             continue
         path = _resolve(option, raw)
         resolved[option] = path
-        if option in directories:
-            _check_directory(option, raw, path)
-            children = [(name, path / name) for name in directories[option]]
-            for name, child in children:
-                _check_file(option, Path(raw) / name, child, None)
-            claimed += [(child, option, f"{raw}/{name}", True) for name, child in children]
-            claimed.append((path, option, str(raw), False))
-        else:
-            _check_file(option, raw, path, replaceable.get(option))
-            claimed.append((path, option, str(raw), True))
+        try:
+            if option in directories:
+                _check_directory(option, raw, path)
+                children = [(name, path / name) for name in directories[option]]
+                for name, child in children:
+                    _check_file(option, Path(raw) / name, child, None)
+                claimed += [(child, option, f"{raw}/{name}", True) for name, child in children]
+                claimed.append((path, option, str(raw), False))
+            else:
+                _check_file(option, raw, path, replaceable.get(option))
+                claimed.append((path, option, str(raw), True))
+        except OSError as exc:  # a name too long, a loop of links, ... while looking
+            reason = exc.strerror or exc.__class__.__name__
+            raise OutputPathError(f"{option} {raw}: {reason}") from None
     _check_clashes(claimed)
     for name, raw_input in (inputs or {}).items():
         if raw_input is None:
             continue
-        source = _resolve(name, raw_input)
+        try:
+            source = _resolve(name, raw_input)
+        except OutputPathError:
+            continue  # an input that cannot be resolved cannot be overwritten either
         for path, option, shown, _ in claimed:
             if path == source:
                 raise OutputPathError(f"{option} {shown}: is also the input {name} {raw_input}")
@@ -182,6 +191,9 @@ def _check_file(
     elif path.exists() and not path.is_file():
         raise OutputPathError(f"{option} {raw}: exists and is not a regular file")
     _check_parent(option, raw, path.parent)
+    # the temporary file beside it is named ".<name>.<8 random>.tmp<suffix>"
+    if len(os.fsencode(path.name + path.suffix)) + _TEMP_EXTRA > _name_max(path.parent):
+        raise OutputPathError(f"{option} {raw}: file name too long")
 
 
 def _check_directory(option: str, raw: PathArg, path: Path) -> None:
@@ -190,10 +202,21 @@ def _check_directory(option: str, raw: PathArg, path: Path) -> None:
     _check_parent(option, raw, path)
 
 
+def _name_max(directory: Path) -> int:
+    while not directory.exists():
+        directory = directory.parent
+    try:
+        return int(os.pathconf(directory, "PC_NAME_MAX"))
+    except (OSError, ValueError):
+        return 255
+
+
 def _check_parent(option: str, raw: PathArg, directory: Path) -> None:
     """The nearest existing ancestor of ``directory`` (itself included) takes new files."""
     existing = directory
     while not existing.exists():
+        if len(os.fsencode(existing.name)) > _name_max(existing):
+            raise OutputPathError(f"{option} {raw}: directory name too long")
         existing = existing.parent
     if not existing.is_dir():
         raise OutputPathError(f"{option} {raw}: {existing} is not a directory")

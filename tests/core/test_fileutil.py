@@ -122,3 +122,19 @@ def test_check_outputs_asks_before_taking_a_directory(tmp_path: Path) -> None:
     assert asked == [(tmp_path / "bag").resolve()]
     with pytest.raises(OutputPathError, match="may not replace"):
         check_outputs({"--out": tmp_path / "bag"}, replaceable={"--out": lambda _: False})
+
+
+def test_check_outputs_refuses_names_the_file_system_cannot_hold(tmp_path: Path) -> None:
+    long = "a" * 250
+    for path in (
+        tmp_path / f"{long}.yaml",  # fits, but its temporary name beside it does not
+        tmp_path / (long * 2) / "x.yaml",
+        tmp_path / (long * 2) / long / "x.yaml",
+    ):
+        with pytest.raises(OutputPathError, match=r"(?i)name too long"):
+            check_outputs({"--out": path})
+    (tmp_path / "loop1").symlink_to(tmp_path / "loop2")
+    (tmp_path / "loop2").symlink_to(tmp_path / "loop1")
+    with pytest.raises(OutputPathError, match=r"--out .*loop1/x\.yaml: cannot resolve the path"):
+        check_outputs({"--out": tmp_path / "loop1" / "x.yaml"})
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["loop1", "loop2"]
