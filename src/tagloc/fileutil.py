@@ -89,12 +89,14 @@ def check_outputs(
     replaceable: Mapping[str, Callable[[Path], bool]] | None = None,
     inputs: Mapping[str, PathArg | None] | None = None,
 ) -> dict[str, Path]:
-    """Check every output path of a command before it starts work; nothing is created.
+    """Check every output path of a command before it starts work; nothing is left behind.
 
     An output passes if it can be written where it is and takes nothing it must not:
 
-    - its nearest existing ancestor is a directory this process can create files in (missing
-      parent directories are created later, by the writer; the check itself creates nothing);
+    - its nearest existing ancestor is a directory this process can create files in (tested by
+      creating and removing a probe file there, the one test that sees permissions, ACLs and
+      read-only mounts alike; missing parent directories are created later, by the writer);
+    - its name leaves room for the temporary name beside it (``NAME_MAX``);
     - a file output is not an existing directory (nor a device, FIFO, ...): an existing regular
       file is replaced, an existing directory never is, unless ``replaceable[option](path)``
       says it is one the writer may replace (a ROS 2 bag directory and nothing else);

@@ -14,7 +14,6 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from tagloc.cli.eval_cmd import eval_app
-from tagloc.cli.options import positive_int, seed_range
 
 if TYPE_CHECKING:
     from tagloc.eval.tag_sweep import TagSweepResult
@@ -26,10 +25,8 @@ def eval_tags(
     out: Annotated[Path, typer.Option(help="Output directory.")] = Path("out/tag_sweep"),
     quick: Annotated[bool, typer.Option("--quick", help="A seconds-long 3x3 grid.")] = False,
     backend: Annotated[str | None, typer.Option(help="Detector: apriltag or aruco.")] = None,
-    seed: Annotated[int | None, typer.Option(help="Sweep seed.", callback=seed_range)] = None,
-    trials: Annotated[
-        int | None, typer.Option(help="Views per cell.", callback=positive_int)
-    ] = None,
+    seed: Annotated[int | None, typer.Option(help="Sweep seed.")] = None,  # checked by the config
+    trials: Annotated[int | None, typer.Option(help="Views per cell.")] = None,
     config: Annotated[
         Path | None, typer.Option("--config", help="Sweep config YAML (TagSweepConfig fields).")
     ] = None,
