@@ -4,8 +4,13 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from pathlib import Path
+
+import tagloc
 
 _MAIN = "from tagloc.cli import main; main()"
+#: The subprocess imports the same tagloc as the tests (a checkout's src, not an installed copy).
+_SRC = str(Path(tagloc.__file__).resolve().parents[1])
 
 
 def run_tagloc(*args: str) -> subprocess.CompletedProcess[str]:
@@ -14,7 +19,7 @@ def run_tagloc(*args: str) -> subprocess.CompletedProcess[str]:
         [sys.executable, "-c", _MAIN, *args],
         capture_output=True,
         text=True,
-        env={"MPLBACKEND": "Agg", "PATH": "", "COLUMNS": "200"},
+        env={"MPLBACKEND": "Agg", "PATH": "", "COLUMNS": "200", "PYTHONPATH": _SRC},
         check=False,
         timeout=300.0,
     )

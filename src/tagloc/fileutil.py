@@ -1,6 +1,11 @@
-"""Atomic file output: write to a temporary file beside the target, then rename over it.
+"""Atomic file output, and the check of a command's output paths before any work starts.
 
-A crash or an error half-way through never leaves a truncated output where a previous good one was.
+- :func:`atomic_path` / :func:`atomic_write_text`: write to a temporary file beside the target,
+  then rename over it. A crash or an error half-way through never leaves a truncated output where
+  a previous good one was. A directory at the target is never replaced.
+- :func:`check_outputs`: every output path of a command, checked at once before it reads or
+  computes anything, so a bad path fails in one line instead of after minutes of work (and leaves
+  nothing behind).
 """
 
 from __future__ import annotations
@@ -8,8 +13,18 @@ from __future__ import annotations
 import contextlib
 import os
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Collection, Iterator, Mapping
 from pathlib import Path
+
+from tagloc.errors import TaglocError
+
+PathArg = str | os.PathLike[str]
+#: Characters a temporary name adds to its target's name and suffix (``.``, ``.``, 8, ``.tmp``).
+_TEMP_EXTRA = 14
+
+
+class OutputPathError(TaglocError, ValueError):
+    """An output path that cannot be written; the message names the option and the path."""
 
 
 @contextlib.contextmanager
@@ -18,9 +33,16 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
 
     The temporary file keeps the target's suffix (so writers that infer the format from it, like
     matplotlib's ``savefig``, still work). On an exception the temporary file is removed and the
-    target is left untouched.
+    target is left untouched. Missing parent directories are created.
+
+    Raises
+    ------
+    OutputPathError
+        If ``path`` is an existing directory (it is never replaced, nor removed).
     """
     target = Path(path)
+    if target.is_dir():
+        raise OutputPathError(f"{target}: is a directory; give a file name")
     target.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp_name = tempfile.mkstemp(
         dir=target.parent, prefix=f".{target.name}.", suffix=f".tmp{target.suffix}"
@@ -76,3 +98,177 @@ def atomic_write_text(path: str | os.PathLike[str], text: str) -> None:
     """Write ``text`` (UTF-8) to ``path`` atomically."""
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
+
+
+def atomic_write_texts(files: Mapping[Path, str]) -> None:
+    """Write several text files (UTF-8) so that a failure leaves none of them changed.
+
+    Every text is written to its temporary file first; only when all are written are they
+    renamed into place (a rename failing half-way is the one case that leaves some renamed).
+    """
+    with contextlib.ExitStack() as stack:
+        for path, text in files.items():
+            stack.enter_context(atomic_path(path)).write_text(text, encoding="utf-8")
+
+
+def check_outputs(
+    outputs: Mapping[str, PathArg | None],
+    *,
+    directories: Mapping[str, Collection[str]] | None = None,
+    replaceable: Mapping[str, Callable[[Path], bool]] | None = None,
+    inputs: Mapping[str, PathArg | None] | None = None,
+) -> dict[str, Path]:
+    """Check every output path of a command before it starts work; nothing is left behind.
+
+    An output passes if it can be written where it is and takes nothing it must not:
+
+    - its nearest existing ancestor is a directory this process can create files in (tested by
+      creating and removing a probe file there, the one test that sees permissions, ACLs and
+      read-only mounts alike; missing parent directories are created later, by the writer);
+    - its name leaves room for the temporary name beside it (``NAME_MAX``);
+    - a file output is not an existing directory (nor a device, FIFO, ...): an existing regular
+      file is replaced, an existing directory never is, unless ``replaceable[option](path)``
+      says it is one the writer may replace (a ROS 2 bag directory and nothing else);
+    - an output directory (an option in ``directories``) is a directory if it exists, and each
+      file the command writes into it passes as a file output;
+    - no two outputs resolve to the same path (symlinks and ``..`` resolved),
+      none lies inside another file or bag output, and none is one of the command's ``inputs``.
+
+    Parameters
+    ----------
+    outputs : mapping of str to path or None
+        Option name (as the user typed it, e.g. ``"--out"``) to output path; None (an output
+        that was not asked for) is skipped.
+    directories : mapping of str to collection of str, optional
+        The options of ``outputs`` that name an output directory, each with the names (relative
+        paths) of the files the command writes into it (may be empty).
+    replaceable : mapping of str to callable, optional
+        Option to a predicate on an existing directory at that output: True if the writer may
+        replace it (e.g. :func:`tagloc.io.is_ros2_bag_directory` for ``--format ros2``).
+    inputs : mapping of str to path or None, optional
+        Option (or argument name) to input path: an output may not overwrite an input.
+
+    Returns
+    -------
+    dict of str to Path
+        The resolved output paths by option (skipped ones left out).
+
+    Raises
+    ------
+    OutputPathError
+        One line, ``"<option> <path>: <reason>"``, for the first output that fails.
+    """
+    directories = directories or {}
+    replaceable = replaceable or {}
+    resolved: dict[str, Path] = {}
+    claimed: list[_Claim] = []
+    for option, raw in outputs.items():
+        if raw is None:
+            continue
+        path = _resolve(option, raw)
+        resolved[option] = path
+        try:
+            if option in directories:
+                _check_directory(option, raw, path)
+                children = [(name, path / name) for name in directories[option]]
+                for name, child in children:
+                    _check_file(option, Path(raw) / name, child, None)
+                claimed += [(child, option, f"{raw}/{name}", True) for name, child in children]
+                claimed.append((path, option, str(raw), False))
+            else:
+                _check_file(option, raw, path, replaceable.get(option))
+                claimed.append((path, option, str(raw), True))
+        except OSError as exc:  # a name too long, a loop of links, ... while looking
+            reason = exc.strerror or exc.__class__.__name__
+            raise OutputPathError(f"{option} {raw}: {reason}") from None
+    _check_clashes(claimed)
+    for name, raw_input in (inputs or {}).items():
+        if raw_input is None:
+            continue
+        try:
+            source = _resolve(name, raw_input)
+        except OutputPathError:
+            continue  # an input that cannot be resolved cannot be overwritten either
+        for path, option, shown, _ in claimed:
+            if path == source:
+                raise OutputPathError(f"{option} {shown}: is also the input {name} {raw_input}")
+    return resolved
+
+
+#: An output path: resolved, its option, as the user wrote it, written as one unit (not a directory
+#: the command fills).
+_Claim = tuple[Path, str, str, bool]
+
+
+def _resolve(option: str, raw: PathArg) -> Path:
+    if not os.fspath(raw):
+        raise OutputPathError(f"{option}: empty path")
+    try:
+        return Path(raw).expanduser().resolve()
+    except (OSError, RuntimeError) as exc:  # a symlink loop
+        raise OutputPathError(f"{option} {raw}: cannot resolve the path ({exc})") from None
+
+
+def _check_file(
+    option: str, raw: PathArg, path: Path, replaceable: Callable[[Path], bool] | None
+) -> None:
+    if path.is_dir():
+        if replaceable is None:
+            raise OutputPathError(f"{option} {raw}: is an existing directory; give a file name")
+        if not replaceable(path):
+            raise OutputPathError(
+                f"{option} {raw}: is an existing directory this output may not replace"
+            )
+    elif path.exists() and not path.is_file():
+        raise OutputPathError(f"{option} {raw}: exists and is not a regular file")
+    _check_parent(option, raw, path.parent)
+    # the temporary file beside it is named ".<name>.<8 random>.tmp<suffix>"
+    if len(os.fsencode(path.name + path.suffix)) + _TEMP_EXTRA > _name_max(path.parent):
+        raise OutputPathError(f"{option} {raw}: file name too long")
+
+
+def _check_directory(option: str, raw: PathArg, path: Path) -> None:
+    if path.exists() and not path.is_dir():
+        raise OutputPathError(f"{option} {raw}: exists and is not a directory")
+    _check_parent(option, raw, path)
+
+
+def _name_max(directory: Path) -> int:
+    while not directory.exists():
+        directory = directory.parent
+    try:
+        return int(os.pathconf(directory, "PC_NAME_MAX"))
+    except (OSError, ValueError):
+        return 255
+
+
+def _check_parent(option: str, raw: PathArg, directory: Path) -> None:
+    """The nearest existing ancestor of ``directory`` (itself included) takes new files."""
+    existing = directory
+    while not existing.exists():
+        if len(os.fsencode(existing.name)) > _name_max(existing):
+            raise OutputPathError(f"{option} {raw}: directory name too long")
+        existing = existing.parent
+    if not existing.is_dir():
+        raise OutputPathError(f"{option} {raw}: {existing} is not a directory")
+    try:  # the only reliable test (permissions, ACLs, read-only mounts, root)
+        fd, probe = tempfile.mkstemp(dir=existing, prefix=".tagloc-probe.")
+    except OSError as exc:
+        reason = exc.strerror or exc.__class__.__name__
+        raise OutputPathError(f"{option} {raw}: cannot write in {existing} ({reason})") from None
+    os.close(fd)
+    os.unlink(probe)
+
+
+def _check_clashes(claimed: list[_Claim]) -> None:
+    """No two options write the same path, nor into an output that is written as one unit."""
+    for i, (path, option, shown, whole) in enumerate(claimed):
+        for other_path, other, other_shown, other_whole in claimed[:i]:
+            if other == option:
+                continue
+            if path == other_path:
+                raise OutputPathError(f"{option} {shown}: the same path as {other} {other_shown}")
+            if other_whole and path.is_relative_to(other_path):
+                raise OutputPathError(f"{option} {shown}: inside the output {other} {other_shown}")
+            if whole and other_path.is_relative_to(path):
+                raise OutputPathError(f"{other} {other_shown}: inside the output {option} {shown}")

@@ -91,6 +91,6 @@ def test_alignment_of_a_degenerate_reference_is_one_evaluation_error(line: bool)
         xyz[:, 0] = np.linspace(0.0, 9.0, 10)
     T_ref = SE3(rotation=SO3.identity(10), translation=xyz)
     T_est = SE3(rotation=SO3.identity(10), translation=xyz + np.array([0.1, 0.0, 0.0]))
-    with pytest.raises(EvaluationError, match=r"^cannot align the estimate: the reference"):
+    with pytest.raises(EvaluationError, match=r"^cannot align the estimate onto the reference"):
         absolute_trajectory_error(stamps, T_ref, T_est, align=True)
     assert absolute_trajectory_error(stamps, T_ref, T_est).rmse == pytest.approx(0.1)

@@ -293,13 +293,14 @@ def test_compressed_images_are_decoded_with_opencv(tmp_path: Path) -> None:
         compressed(2 * S, "png", png_gray),
         compressed(3 * S, "jpeg", jpeg),
         compressed(4 * S, "jpeg", b"not an image"),
+        compressed(5 * S, "png", b""),  # OpenCV raises on an empty buffer
     ]
     source = BagSource(raw_bag(tmp_path / "a.mcap", items))
     a, b, c = (m for _, m in source)
     assert a.encoding == "bgr8" and np.array_equal(a.image, bgr)  # type: ignore[union-attr]
     assert b.encoding == "mono8" and np.array_equal(b.image, gray)  # type: ignore[union-attr]
     assert c.encoding == "mono8" and c.image.shape == (8, 10)  # type: ignore[union-attr]
-    assert source.skipped == {"undecodable": 1}
+    assert source.skipped == {"undecodable": 2}
 
 
 def test_tag_corner_order_and_family_options(tmp_path: Path) -> None:

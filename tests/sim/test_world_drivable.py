@@ -11,13 +11,13 @@ import pytest
 import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from tagloc.mapping.sim_survey import build_map_from_drive
 
 from tagloc.errors import ConfigError, SimulationError
 from tagloc.mapping import MappingError
 from tagloc.sim import World, simulate_drive
 from tagloc.sim.coverage import route_coverage
 from tagloc.sim.scenarios import build_scenario
+from tagloc.sim.survey import build_map_from_drive
 
 
 def _world(**route: Any) -> dict[str, Any]:

@@ -11,6 +11,7 @@ from tagloc.cli import localize_cmd
 from tagloc.cli.eval_cmd import eval_app
 from tagloc.cli.eval_tags_cmd import eval_tags  # noqa: F401  (registers tagloc eval tags)
 from tagloc.cli.map_cmd import map_app
+from tagloc.cli.options import duration_range, in_range, seed_range
 from tagloc.cli.sim_cmd import sim_app
 from tagloc.cli.world_cmd import coverage
 
@@ -42,9 +43,12 @@ WorldOption = Annotated[
 def demo(
     out: Annotated[Path, typer.Option(help="Output directory.")] = Path("out"),
     world: WorldOption = None,
-    seed: Annotated[int | None, typer.Option(help="Override the odometry seed.")] = None,
+    seed: Annotated[
+        int | None, typer.Option(help="Override the odometry seed.", callback=seed_range)
+    ] = None,
     duration: Annotated[
-        float | None, typer.Option(help="Localize only the first N s of the drive.")
+        float | None,
+        typer.Option(help="Localize only the first N s of the drive.", callback=duration_range),
     ] = None,
     quick: Annotated[
         bool, typer.Option("--quick", help="Skip the survey; localize against the true map.")
@@ -53,7 +57,8 @@ def demo(
         list[int],
         typer.Option(
             help="Survey anchor tag id, held at its true pose (repeat; default: the "
-            "first tag seen)."
+            "first tag seen).",
+            callback=in_range(ge=0),
         ),
     ] = [],  # noqa: B006
 ) -> None:

@@ -28,6 +28,8 @@ from typing import TYPE_CHECKING
 from rich.console import Console
 from rich.table import Table
 
+from tagloc.eval.report import REPORT_FILES
+
 if TYPE_CHECKING:
     from tagloc.eval import EvalSummary
     from tagloc.eval.drive_report import DriveSummary
@@ -37,6 +39,11 @@ if TYPE_CHECKING:
     from tagloc.sim.survey import MapErrors
     from tagloc.tags.tagmap import TagMap
 
+#: The files :func:`run_demo` may write into its output directory.
+DEMO_FILES = (
+    "world.yaml", "map/tags.yaml", "map/map_report.md", "drive.png",
+    *(f"{run}/{name}" for run in ("localize", "localize_true_map") for name in REPORT_FILES),
+)  # fmt: skip
 #: Survey drives use every n-th camera frame (30 Hz frames overlap; 10 Hz keeps the build short).
 SURVEY_CAMERA_STRIDE = 3
 
@@ -112,19 +119,25 @@ def run_demo(
     ------
     SimulationError
         An anchor id the world has no tag for (before anything is written).
+    OutputPathError
+        ``out`` or a file in it cannot be written (before any work).
     """
     from tagloc.eval import write_report
     from tagloc.eval.drive_report import summarize_drive
     from tagloc.eval.plots import plot_world_and_paths
-    from tagloc.fileutil import atomic_write_text
+    from tagloc.fileutil import atomic_write_text, check_outputs
     from tagloc.sim import load_default_world, load_world
     from tagloc.sim.scenarios import ScenarioSource, build_scenario, localize_scenario
 
+    check_outputs({"--out": out}, directories={"--out": DEMO_FILES}, inputs={"--world": world_path})
     console = Console()
     world = load_default_world() if world_path is None else load_world(world_path)
     for tag_id in anchors:
         world.find_tag(tag_id)
     seed = world.robot.odometry.seed if seed is None else seed
+    # the drive to localize first: what fails on it fails before anything is written
+    scenario = build_scenario("default", seed, duration_s, world=world)
+    drive = summarize_drive(scenario.drive)
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "world.yaml", world.to_yaml_text())
     files = [out / "world.yaml"]
@@ -134,8 +147,7 @@ def run_demo(
         with console.status("surveying: simulated survey drive, factor-graph map build"):
             survey = survey_and_build(world, seed + 1, out / "map", anchors)
         files += [out / "map" / "tags.yaml", out / "map" / "map_report.md"]
-    # 2. the drive to localize, against the built map (and the true map for reference)
-    scenario = build_scenario("default", seed, duration_s, world=world)
+    # 2. localize the drive against the built map (and the true map for reference)
     source = ScenarioSource(scenario)  # the drive's detections, shared by both runs
     with console.status("localizing against the true tag map"):
         run_true = localize_scenario(scenario, source=source)
@@ -150,7 +162,6 @@ def run_demo(
     if run_built is not None:
         summaries["built map"] = write_report(run_built, out / "localize")
         files += [out / "localize" / "report.html"]
-    drive = summarize_drive(scenario.drive)
     main = run_built or run_true
     ate = summaries["built map" if run_built else "true map"].estimators["fused"].ate_rmse_m
     plot_world_and_paths(

@@ -16,6 +16,8 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
+from tagloc.cli.options import duration_range, in_range, seed_range
+
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
@@ -33,17 +35,28 @@ eval_app = typer.Typer(
 def eval_run(
     scenario: Annotated[str, typer.Option(help="Simulated scenario (default, kidnap, ...).")],
     out: Annotated[Path, typer.Option(help="Output directory.")] = Path("out/eval"),
-    seed: Annotated[int, typer.Option(help="Scenario seed.")] = 0,
-    duration: Annotated[float | None, typer.Option(help="First N s only.")] = None,
-    range_m: Annotated[float, typer.Option(help="Z: opportunity range, m.")] = 3.0,
-    position_cm: Annotated[float, typer.Option(help="X: position tolerance, cm.")] = 5.0,
-    rotation_deg: Annotated[float, typer.Option(help="Y: rotation tolerance, deg.")] = 2.0,
+    seed: Annotated[int, typer.Option(help="Scenario seed.", callback=seed_range)] = 0,
+    duration: Annotated[
+        float | None, typer.Option(help="First N s only.", callback=duration_range)
+    ] = None,
+    range_m: Annotated[
+        float, typer.Option(help="Z: opportunity range, m.", callback=in_range(gt=0, le=1e3))
+    ] = 3.0,
+    position_cm: Annotated[
+        float, typer.Option(help="X: position tolerance, cm.", callback=in_range(gt=0, le=1e5))
+    ] = 5.0,
+    rotation_deg: Annotated[
+        float, typer.Option(help="Y: rotation tolerance, deg.", callback=in_range(gt=0, le=180))
+    ] = 2.0,
     strict: Annotated[bool, typer.Option("--strict", help="Exit 2 if a check fails.")] = False,
 ) -> None:
     """Localize a simulated scenario and write its evaluation report to OUT."""
     from tagloc.eval import EvalConfig, write_report
+    from tagloc.eval.report import REPORT_FILES
+    from tagloc.fileutil import check_outputs
     from tagloc.sim.scenarios import run_scenario
 
+    check_outputs({"--out": out}, directories={"--out": REPORT_FILES})
     config = EvalConfig(
         opportunity_range_m=range_m,
         position_tol_m=position_cm / 100.0,
@@ -95,8 +108,12 @@ def _num(value: float, digits: int, kind: str = "f") -> str:
 def eval_files(
     truth: Annotated[Path, typer.Option(help="Reference TUM file (ground truth).")],
     est: Annotated[list[Path], typer.Option(help="Estimate TUM file (repeatable).")],
-    delta_m: Annotated[float, typer.Option(help="RPE pair spacing, m of truth path.")] = 1.0,
-    max_diff_s: Annotated[float, typer.Option(help="Stamp association tolerance, s.")] = 0.01,
+    delta_m: Annotated[
+        float, typer.Option(help="RPE pair spacing, m of truth path.", callback=in_range(gt=0))
+    ] = 1.0,
+    max_diff_s: Annotated[
+        float, typer.Option(help="Stamp association tolerance, s.", callback=in_range(ge=0))
+    ] = 0.01,
     align: Annotated[bool, typer.Option("--align", help="SE(3)-align first (evo -a).")] = False,
 ) -> None:
     """ATE and RPE (evo) of TUM trajectories against a reference TUM trajectory."""

@@ -25,7 +25,7 @@ def eval_tags(
     out: Annotated[Path, typer.Option(help="Output directory.")] = Path("out/tag_sweep"),
     quick: Annotated[bool, typer.Option("--quick", help="A seconds-long 3x3 grid.")] = False,
     backend: Annotated[str | None, typer.Option(help="Detector: apriltag or aruco.")] = None,
-    seed: Annotated[int | None, typer.Option(help="Sweep seed.")] = None,
+    seed: Annotated[int | None, typer.Option(help="Sweep seed.")] = None,  # checked by the config
     trials: Annotated[int | None, typer.Option(help="Views per cell.")] = None,
     config: Annotated[
         Path | None, typer.Option("--config", help="Sweep config YAML (TagSweepConfig fields).")
@@ -36,8 +36,10 @@ def eval_tags(
     from rich.progress import Progress
 
     from tagloc.eval.tag_sweep import run_tag_sweep
-    from tagloc.eval.tag_sweep_report import write_tag_sweep
+    from tagloc.eval.tag_sweep_report import SWEEP_FILES, write_tag_sweep
+    from tagloc.fileutil import check_outputs
 
+    check_outputs({"--out": out}, directories={"--out": SWEEP_FILES}, inputs={"--config": config})
     sweep = _sweep_config(config, quick, backend=backend, seed=seed, trials=trials)
     with Progress(transient=True) as bar:
         task = bar.add_task("rendering and detecting", total=None)

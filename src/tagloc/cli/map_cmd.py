@@ -15,6 +15,8 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
+from tagloc.cli.options import OptionError, in_range, positive_int, seed_range
+
 if TYPE_CHECKING:
     from tagloc.geometry import SE3
     from tagloc.mapping import Survey
@@ -23,6 +25,11 @@ map_app = typer.Typer(
     help="Tag maps (tags.yaml): build one from a survey, check one, compare two.",
     no_args_is_help=True,
 )
+
+#: Largest tag edge accepted (``--tag-size``, ``--size``), m.
+MAX_TAG_EDGE_M = 100.0
+#: Most odometry self-calibration rounds accepted (each is a full optimization of the survey).
+MAX_CALIBRATION_ROUNDS = 10
 
 MapFile = Annotated[Path, typer.Argument(help="Tag map YAML file.", show_default=False)]
 
@@ -39,8 +46,13 @@ def map_check(path: MapFile) -> None:
 def map_diff(
     old: MapFile,
     new: MapFile,
-    min_move_cm: Annotated[float, typer.Option(help="Smaller moves are not reported.")] = 0.5,
-    min_rot_deg: Annotated[float, typer.Option(help="Smaller rotations are not reported.")] = 0.5,
+    min_move_cm: Annotated[
+        float, typer.Option(help="Smaller moves are not reported.", callback=in_range(ge=0))
+    ] = 0.5,
+    min_rot_deg: Annotated[
+        float,
+        typer.Option(help="Smaller rotations are not reported.", callback=in_range(ge=0, le=180)),
+    ] = 0.5,
     exit_code: Annotated[
         bool, typer.Option("--exit-code", help="Exit with 1 if the maps differ (as git diff).")
     ] = False,
@@ -83,6 +95,24 @@ def _pairs(values: list[str], option: str, convert: type) -> dict[str, object]:
         except ValueError:
             raise MappingError(f"{option} {value!r}: expected KEY=VALUE") from None
     return out
+
+
+def _tag_sizes(values: list[str]) -> dict[int, float]:
+    """``--size ID=EDGE_M`` (repeatable) as ``{id: edge}``; ids >= 0, finite positive edges."""
+    from tagloc.mapping import MappingError
+
+    sizes: dict[int, float] = {}
+    for value in values:
+        key, _, raw = value.partition("=")
+        try:
+            tag_id, edge = int(key), float(raw)
+        except ValueError:
+            raise MappingError(f"--size {value!r}: expected ID=EDGE_M with an integer id") from None
+        if tag_id < 0 or not 0.0 < edge <= MAX_TAG_EDGE_M:
+            wanted = f"an id >= 0 and an edge > 0 and <= {MAX_TAG_EDGE_M:g} m"
+            raise OptionError(f"--size {value!r}: expected {wanted}")
+        sizes[tag_id] = edge
+    return sizes
 
 
 def _tag_topics(cameras_yaml: Path, given: list[str]) -> dict[str, str]:
@@ -156,8 +186,12 @@ def map_build(
     bag: Annotated[Path | None, typer.Option(help="Bag with odometry and tag detections.")] = None,
     sim: Annotated[bool, typer.Option("--sim", help="Map a simulated survey drive.")] = False,
     world: Annotated[Path | None, typer.Option(help="World for --sim (default office).")] = None,
-    seed: Annotated[int, typer.Option(help="Odometry and detector seed for --sim.")] = 1,
-    camera_stride: Annotated[int, typer.Option(help="Use every n-th camera frame.")] = 1,
+    seed: Annotated[
+        int, typer.Option(help="Odometry and detector seed for --sim.", callback=seed_range)
+    ] = 1,
+    camera_stride: Annotated[
+        int, typer.Option(help="Use every n-th camera frame.", callback=positive_int)
+    ] = 1,
     cameras: Annotated[Path | None, typer.Option(help="Kalibr cameras.yaml (with --bag).")] = None,
     camera_poses: Annotated[
         Path | None, typer.Option(help="camera_poses.yaml: T_body_cam of each camera.")
@@ -172,43 +206,49 @@ def map_build(
     corner_order: Annotated[
         str, typer.Option(help="How the bag lists corners, e.g. bl_br_tr_tl.")
     ] = "tl_tr_br_bl",
-    anchor: Annotated[list[int], typer.Option(help="Anchor tag id (repeat).")] = [],  # noqa: B006
+    anchor: Annotated[
+        list[int], typer.Option(help="Anchor tag id (repeat).", callback=in_range(ge=0))
+    ] = [],  # noqa: B006
     anchors: Annotated[
         Path | None, typer.Option(help="tags.yaml whose entries give anchor poses.")
     ] = None,
-    tag_size: Annotated[float | None, typer.Option(help="Default tag edge, m.")] = None,
+    tag_size: Annotated[
+        float | None,
+        typer.Option(help="Default tag edge, m.", callback=in_range(gt=0, le=MAX_TAG_EDGE_M)),
+    ] = None,
     size: Annotated[list[str], typer.Option(help="ID=EDGE_M per tag (repeat).")] = [],  # noqa: B006
     report: Annotated[Path | None, typer.Option(help="QA report file (.json or .md).")] = None,
     calibrate_odometry: Annotated[
         int | None,
         typer.Option(
             help="Odometry self-calibration rounds (default: with --sim the simulation's "
-            "matched configuration, 1 round then joint; else 0)."
+            "matched configuration, 1 round then joint; else 0).",
+            callback=in_range(ge=0, le=MAX_CALIBRATION_ROUNDS),
         ),
     ] = None,
 ) -> None:
     """Build a tag map from a survey drive (a bag, or --sim) and print its QA report."""
     from rich.progress import Progress
 
-    from tagloc.fileutil import atomic_write_text
+    from tagloc.fileutil import atomic_write_texts, check_outputs
     from tagloc.mapping import MapBuildConfig, MappingError, build_tag_map
     from tagloc.sim.survey import build_map_from_drive, sim_build_config
-    from tagloc.tags.tagmap import load_tag_map, save_tag_map
+    from tagloc.tags.tagmap import load_tag_map
 
     if sim == (bag is not None):
         raise MappingError("give exactly one of --bag PATH or --sim")
     if sim and anchors is not None:
         raise MappingError("--anchors is for --bag (with --sim, give --anchor ID: true poses)")
-    try:
-        sizes = {int(k): float(str(v)) for k, v in _pairs(size, "--size", float).items()}
-    except ValueError:
-        raise MappingError(f"--size {size}: expected ID=EDGE_M with an integer id") from None
+    check_outputs(
+        {"--out": out, "--report": report},
+        inputs={"--bag": bag, "--world": world, "--cameras": cameras,
+                "--camera-poses": camera_poses, "--tagslam": tagslam, "--anchors": anchors},
+    )  # fmt: skip
+    sizes = _tag_sizes(size)
     known_anchors = (
         {} if anchors is None else {e.id: e.T_frame_tag() for e in load_tag_map(anchors)}
     )
-    rounds = (
-        {} if calibrate_odometry is None else {"calibration_rounds": max(0, calibrate_odometry)}
-    )
+    rounds = {} if calibrate_odometry is None else {"calibration_rounds": calibrate_odometry}
     with Progress(transient=True) as bar:
         task = bar.add_task("mapping", total=1.0)
 
@@ -258,9 +298,9 @@ def map_build(
             T_map_anchor = {i: known.get(i, SE3.identity()) for i in chosen}
             config = MapBuildConfig(**rounds)
             tag_map, qa = build_tag_map(survey, T_map_anchor, config, progress)
-    save_tag_map(tag_map, out)
+    files = {out: tag_map.to_yaml_text()}
     if report is not None:
-        text = qa.to_json() if report.suffix == ".json" else qa.to_markdown()
-        atomic_write_text(report, text)
+        files[report] = qa.to_json() if report.suffix == ".json" else qa.to_markdown()
+    atomic_write_texts(files)  # both or neither
     typer.echo("\n".join(qa.summary_lines()))
     typer.echo(f"wrote {out} ({tag_map.summary()})")

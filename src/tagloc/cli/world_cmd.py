@@ -8,26 +8,45 @@ from typing import Annotated
 import typer
 from pydantic import ValidationError
 
+from tagloc.cli.options import in_range, positive_int
 from tagloc.errors import ConfigError
+
+#: Most laps ``tagloc world coverage`` drives (each lap costs seconds and tens of MB).
+MAX_LAPS = 10
 
 
 def coverage(
     path: Annotated[
         Path | None, typer.Argument(help="World YAML file (default: the built-in office floor).")
     ] = None,
-    laps: Annotated[int, typer.Option(help="Laps of the route to drive.")] = 1,
-    stride: Annotated[int, typer.Option(help="Check every n-th camera frame.")] = 3,
+    laps: Annotated[
+        int,
+        typer.Option(help="Laps of the route to drive.", callback=in_range(ge=1, le=MAX_LAPS)),
+    ] = 1,
+    stride: Annotated[
+        int, typer.Option(help="Check every n-th camera frame.", callback=positive_int)
+    ] = 3,
     min_distance: Annotated[
-        float, typer.Option(help="List gaps of at least this many metres ...")
+        float,
+        typer.Option(help="List gaps of at least this many metres ...", callback=in_range(ge=0)),
     ] = 1.0,
     min_rotation: Annotated[
-        float, typer.Option(help="... or of this many degrees of turn.")
+        float,
+        typer.Option(help="... or of this many degrees of turn.", callback=in_range(ge=0)),
     ] = 30.0,
     max_range: Annotated[
-        float | None, typer.Option(help="Count a tag as in view within this range, m (default 8).")
+        float | None,
+        typer.Option(
+            help="Count a tag as in view within this range, m (default 8).",
+            callback=in_range(gt=0),
+        ),
     ] = None,
     max_view_angle: Annotated[
-        float | None, typer.Option(help="... and this angle off its face, deg (default 75).")
+        float | None,
+        typer.Option(
+            help="... and this angle off its face, deg (default 75).",
+            callback=in_range(gt=0, le=90),
+        ),
     ] = None,
     csv_out: Annotated[
         Path | None, typer.Option("--csv", help="Also write the gaps as CSV.")
@@ -38,10 +57,11 @@ def coverage(
     from rich.console import Console
     from rich.table import Table
 
-    from tagloc.fileutil import atomic_write_text
+    from tagloc.fileutil import atomic_write_text, check_outputs
     from tagloc.sim import ObservationConfig, load_default_world, load_world
     from tagloc.sim.coverage import gaps_csv, route_coverage
 
+    check_outputs({"--csv": csv_out}, inputs={"PATH": path})
     world = load_default_world() if path is None else load_world(path)
     limits = {
         k: v

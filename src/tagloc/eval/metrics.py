@@ -75,8 +75,8 @@ def absolute_trajectory_error(
     Raises
     ------
     EvaluationError
-        Lengths differ, stamps are not strictly increasing, poses are not finite, or ``align``
-        is asked of a reference whose positions are degenerate (a point or a straight line).
+        Lengths differ, stamps are not strictly increasing, poses are not finite, or the
+        alignment is degenerate (a static or straight track).
     """
     from evo.core import metrics
     from evo.core.geometry import GeometryException
@@ -94,13 +94,16 @@ def absolute_trajectory_error(
     if align:
         try:
             traj_est.align(traj_ref)  # type: ignore[attr-defined]
-        except GeometryException:
+        except GeometryException as exc:
             raise EvaluationError(
-                "cannot align the estimate: the reference positions are degenerate (a single "
-                "point or a straight line); evaluate without alignment"
+                f"cannot align the estimate onto the reference ({exc}): the positions do not "
+                "span enough space (a static or straight track); evaluate it without alignment"
             ) from None
     ape = metrics.APE(metrics.PoseRelation.translation_part)
-    ape.process_data((traj_ref, traj_est))
+    try:
+        ape.process_data((traj_ref, traj_est))
+    except metrics.MetricsException as exc:
+        raise EvaluationError(f"cannot compute the ATE: {exc}") from None
     errors = np.asarray(ape.error, dtype=np.float64)
     return TrajectoryError(
         rmse=float(np.sqrt(np.mean(errors**2))),

@@ -32,6 +32,8 @@ logger = logging.getLogger(__name__)
 
 TUM_FILES = {"truth": "truth.tum", "odometry": "odometry.tum", "fused": "fused.tum",
              "baseline": "baseline.tum"}  # fmt: skip
+#: Every file :func:`write_report` may write into its directory.
+REPORT_FILES = (*TUM_FILES.values(), "summary.json", "report.html")
 
 
 def write_report(

@@ -14,6 +14,7 @@ over pairs of stamps whose ground-truth path length differs by ``delta_m``.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -142,11 +143,13 @@ def relative_pose_error(
     Raises
     ------
     EvaluationError
-        Lengths differ, or poses are not finite.
+        Lengths differ, poses are not finite, or ``delta_m`` is not a finite positive number.
     """
     from evo.core import filters, metrics
     from evo.core.units import Unit
 
+    if not (math.isfinite(delta_m) and delta_m > 0):
+        raise EvaluationError(f"RPE pair spacing {delta_m!r} m: expected a finite number > 0")
     if len(T_map_base_ref) != len(stamps_ns) or len(T_map_base_est) != len(stamps_ns):
         raise EvaluationError("relative_pose_error: trajectory lengths differ from the stamps")
     traj_ref = _to_evo(stamps_ns, T_map_base_ref, "reference")
@@ -161,6 +164,8 @@ def relative_pose_error(
             rpe.process_data((traj_ref, traj_est))
         except filters.FilterException:  # no pair delta_m apart: the path is too short
             return None
+        except metrics.MetricsException as exc:
+            raise EvaluationError(f"cannot compute the RPE per {delta_m:g} m: {exc}") from None
         values[relation] = np.asarray(rpe.error, dtype=np.float64)
     translation = values[metrics.PoseRelation.translation_part]
     rotation = values[metrics.PoseRelation.rotation_angle_deg]

@@ -21,7 +21,8 @@ Covariances are rotated from tagloc's body tangent to ROS' parent-frame conventi
 to the log time. Output is atomic: everything is written inside a temporary directory beside the
 target and renamed into place by :meth:`BagSink.close`; on an exception inside the ``with``
 block (or :meth:`BagSink.abort`, or garbage collection without ``close``) the temporary output
-is removed and the target is left as it was.
+is removed and the target is left as it was. An existing directory at the target is never
+removed, except a lone ROS 2 bag that a ``ros2`` output replaces (:mod:`tagloc.io.bag_output`).
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ from typing import Any, Literal, Self
 
 import numpy as np
 
+from tagloc.io.bag_output import BagFormat, check_bag_target, is_ros2_bag_directory
 from tagloc.io.convert import TAGS_ROS1, TAGS_ROS2, cov_ros_from_body, make_typestore
 from tagloc.io.errors import BagWriteError
 from tagloc.messages import (
@@ -51,7 +53,6 @@ from tagloc.messages import (
 )
 from tagloc.tags.families import family_spec
 
-BagFormat = Literal["mcap", "ros2", "ros1"]
 _MSGTYPES: dict[type[Message], str] = {
     OdometryMsg: "nav_msgs/msg/Odometry",
     TransformMsg: "tf2_msgs/msg/TFMessage",
@@ -91,12 +92,14 @@ class BagSink:
     storage : {"sqlite3", "mcap"}
         Storage plugin of a ``ros2`` directory (the Humble default is sqlite3).
     overwrite : bool
-        Replace an existing output at ``path`` on :meth:`close`; otherwise it is an error.
+        Replace an existing output at ``path`` on :meth:`close`; otherwise it is an error. Only
+        a file, or for ``ros2`` a directory holding a ROS 2 bag and nothing else, is replaced.
 
     Raises
     ------
     BagWriteError
-        If ``path`` exists and ``overwrite`` is False, or the bag cannot be created.
+        If ``path`` exists and ``overwrite`` is False, or is a directory that may not be
+        replaced (:func:`~tagloc.io.bag_output.check_bag_target`), or the bag cannot be created.
     """
 
     def __init__(
@@ -112,6 +115,7 @@ class BagSink:
         self.path, self.format = Path(path), format
         if self.path.exists() and not overwrite:
             raise BagWriteError(f"{self.path}: exists already; pass overwrite=True to replace it")
+        check_bag_target(self.path, format)
         self._encoder = _Encoder(1 if format == "ros1" else 2)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._tmpdir = Path(tempfile.mkdtemp(prefix=f".{self.path.name}.", dir=self.path.parent))
@@ -204,7 +208,7 @@ class BagSink:
             self._writer.close()
             if self.format == "mcap":
                 self._inner = self._inner / f"{self._inner.name}.mcap"
-            _replace(self._inner, self.path, self._tmpdir)
+            _replace(self._inner, self.path, self._tmpdir, self.format)
         except Exception as exc:
             raise BagWriteError(f"{self.path}: cannot finish the bag ({exc})") from exc
         finally:
@@ -249,9 +253,12 @@ def _latched_qos() -> Any:
     )  # fmt: skip
 
 
-def _replace(src: Path, dst: Path, tmpdir: Path) -> None:
-    """Rename ``src`` to ``dst``; an existing directory at ``dst`` is first moved into tmpdir."""
-    if dst.is_dir() and not dst.is_symlink():
+def _replace(src: Path, dst: Path, tmpdir: Path, format: BagFormat) -> None:
+    """Rename ``src`` to ``dst``. A lone ROS 2 bag directory at ``dst`` (checked again: it may
+    have changed while the bag was written) is first moved into ``tmpdir``, which is removed
+    after; any other directory makes this fail and stays as it is."""
+    check_bag_target(dst, format)
+    if dst.is_dir() and not dst.is_symlink() and is_ros2_bag_directory(dst):
         dst.rename(tmpdir / ".replaced")
     os.replace(src, dst)
 

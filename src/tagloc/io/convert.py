@@ -220,7 +220,10 @@ def _image(msg: Any, log_ns: int, opts: DecodeOptions, static: bool) -> Decoded:
 
 
 def _compressed(msg: Any, log_ns: int, opts: DecodeOptions, static: bool) -> Decoded:
-    image: Any = cv2.imdecode(np.asarray(msg.data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+    try:
+        image: Any = cv2.imdecode(np.asarray(msg.data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+    except cv2.error:  # an empty buffer, an image too large for OpenCV's limits
+        image = None
     if image is None:
         return [Bad("undecodable", f"cv2.imdecode failed on {msg.format!r} data")]
     if image.dtype != np.uint8 or not (image.ndim == 2 or image.shape[2] in (1, 3, 4)):

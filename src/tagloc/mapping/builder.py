@@ -57,6 +57,7 @@ from tagloc.mapping.graph import (
     marginal_covariances,
     solve_graph,
 )
+from tagloc.mapping.gtsam_bridge import SolverError
 from tagloc.mapping.initialize import (
     choose_branches,
     initialize_keyframes,
@@ -138,7 +139,8 @@ def build_tag_map(
     Raises
     ------
     MappingError
-        No odometry, a tag of unknown size, an anchor never observed, no usable detection.
+        No odometry, a tag of unknown size, an anchor never observed, no usable detection, a
+        graph GTSAM cannot solve (:class:`~tagloc.mapping.gtsam_bridge.SolverError`).
     """
     config = config or MapBuildConfig()
     anchors = anchors or {}
@@ -157,68 +159,80 @@ def build_tag_map(
     M_map_tag = initialize_tags(obs, M_map_base, M_anchor)
     branch = choose_branches(obs, M_map_base, M_map_tag)
     timings["initialize"] = time.perf_counter() - t
-    # 3. optimize, re-pick branches, repeat
-    t = time.perf_counter()
-    M_map_base_odometry = _odometry_in_map(obs, M_map_base)
-    M_odom_raw = obs.T_odom_base.as_matrix().reshape(-1, 4, 4)
-    M_odom_base, calibration = M_odom_raw, OdometryCalibration.identity()
-    solution: GraphSolution | None = None
-    iterations, optimize_s, error_initial = 0, 0.0, float("nan")
-    n_rounds = config.rounds + config.calibration_rounds
-    for round_ in range(n_rounds):
+    # 3. and 4.: GTSAM names a tag by its index: name it by family and id
+    tag_names = [f"{family}:{tag_id}" for family, tag_id in obs.tag_keys]
+    try:
+        # 3. optimize, re-pick branches, repeat
+        t = time.perf_counter()
+        M_map_base_odometry = _odometry_in_map(obs, M_map_base)
+        M_odom_raw = obs.T_odom_base.as_matrix().reshape(-1, 4, 4)
+        M_odom_base, calibration = M_odom_raw, OdometryCalibration.identity()
+        solution: GraphSolution | None = None
+        iterations, optimize_s, error_initial = 0, 0.0, float("nan")
+        n_rounds = config.rounds + config.calibration_rounds
+        for round_ in range(n_rounds):
+            if progress is not None:
+                progress("optimize", round_, n_rounds)
+            data = _graph_input(obs, M_odom_base, branch, M_anchor, M_map_base, M_map_tag)
+            solution = solve_graph(data, config)
+            iterations += solution.iterations
+            optimize_s += solution.optimize_s
+            error_initial = solution.error_initial if round_ == 0 else error_initial
+            M_map_base, M_map_tag = solution.M_map_base, solution.M_map_tag
+            new_branch = choose_branches(obs, M_map_base, M_map_tag)
+            changed = int((new_branch != branch).sum())
+            branch = new_branch
+            calibrate = round_ + 1 >= config.rounds and round_ + 1 < n_rounds
+            logger.info(
+                "round %d: %d iterations, %d branches changed", round_, solution.iterations, changed
+            )
+            if calibrate:
+                calibration = fit_calibration(M_odom_raw, M_map_base)
+                M_odom_base = apply_calibration(M_odom_raw, calibration)
+                logger.info("odometry calibration: %s", calibration)
+            elif not changed:
+                break
+        assert solution is not None
+        timings["pose_rounds"] = time.perf_counter() - t
+        t_refine = time.perf_counter()
+        ambiguous: list[int] = []
+        held = held_tags(M_anchor, obs.tag, M_map_tag)
+        state = State(M_map_base, M_map_tag, calibration_vector(calibration))
+        if config.factors == "corners":
+            solution, state, ambiguous = refine_and_test_tilts(
+                obs,
+                M_odom_raw,
+                state,
+                held,
+                set(M_anchor),
+                survey.cameras,
+                survey.T_base_cam,
+                config,
+            )
+            iterations += solution.iterations
+            optimize_s += solution.optimize_s
+            logger.info("odometry calibration: %s", calibration_from_vector(state.c))
         if progress is not None:
-            progress("optimize", round_, n_rounds)
-        data = _graph_input(obs, M_odom_base, branch, M_anchor, M_map_base, M_map_tag)
-        solution = solve_graph(data, config)
-        iterations += solution.iterations
-        optimize_s += solution.optimize_s
-        error_initial = solution.error_initial if round_ == 0 else error_initial
-        M_map_base, M_map_tag = solution.M_map_base, solution.M_map_tag
-        new_branch = choose_branches(obs, M_map_base, M_map_tag)
-        changed = int((new_branch != branch).sum())
-        branch = new_branch
-        calibrate = round_ + 1 >= config.rounds and round_ + 1 < n_rounds
-        logger.info(
-            "round %d: %d iterations, %d branches changed", round_, solution.iterations, changed
-        )
-        if calibrate:
-            calibration = fit_calibration(M_odom_raw, M_map_base)
-            M_odom_base = apply_calibration(M_odom_raw, calibration)
-            logger.info("odometry calibration: %s", calibration)
-        elif not changed:
-            break
-    assert solution is not None
-    timings["pose_rounds"] = time.perf_counter() - t
-    t_refine = time.perf_counter()
-    ambiguous: list[int] = []
-    held = held_tags(M_anchor, obs.tag, M_map_tag)
-    state = State(M_map_base, M_map_tag, calibration_vector(calibration))
-    if config.factors == "corners":
-        solution, state, ambiguous = refine_and_test_tilts(
-            obs, M_odom_raw, state, held, set(M_anchor), survey.cameras, survey.T_base_cam, config
-        )
-        iterations += solution.iterations
-        optimize_s += solution.optimize_s
-        logger.info("odometry calibration: %s", calibration_from_vector(state.c))
-    if progress is not None:
-        progress("optimize", config.rounds, config.rounds)
-    timings["corner_refinement"] = time.perf_counter() - t_refine
-    timings["optimize"] = optimize_s
-    timings["graph"] = time.perf_counter() - t - optimize_s
-    # 4. covariances
-    t = time.perf_counter()
-    if config.compute_covariance and config.factors == "corners":
-        # the last linearization of the refinement: the corners' Gauss-Newton information
-        solution = marginal_covariances(solution)
-    elif config.compute_covariance:
-        data = _graph_input(
-            obs, M_odom_base, branch, M_anchor, solution.M_map_base, solution.M_map_tag
-        )
-        graph, values = build_graph(data, config)
-        at = replace(solution, graph=graph, values=values)
-        solution = replace(solution, cov_map_tag=marginal_covariances(at).cov_map_tag)
-        solution = replace(solution, marginals_s=time.perf_counter() - t)
-    timings["covariance"] = solution.marginals_s if config.compute_covariance else 0.0
+            progress("optimize", config.rounds, config.rounds)
+        timings["corner_refinement"] = time.perf_counter() - t_refine
+        timings["optimize"] = optimize_s
+        timings["graph"] = time.perf_counter() - t - optimize_s
+        # 4. covariances
+        t = time.perf_counter()
+        if config.compute_covariance and config.factors == "corners":
+            # the last linearization of the refinement: the corners' Gauss-Newton information
+            solution = marginal_covariances(solution)
+        elif config.compute_covariance:
+            data = _graph_input(
+                obs, M_odom_base, branch, M_anchor, solution.M_map_base, solution.M_map_tag
+            )
+            graph, values = build_graph(data, config)
+            at = replace(solution, graph=graph, values=values)
+            solution = replace(solution, cov_map_tag=marginal_covariances(at).cov_map_tag)
+            solution = replace(solution, marginals_s=time.perf_counter() - t)
+        timings["covariance"] = solution.marginals_s if config.compute_covariance else 0.0
+    except SolverError as exc:
+        raise exc.naming(tag_names) from None
     # 5. QA and the map
     t = time.perf_counter()
     tag_map, report = _map_and_report(

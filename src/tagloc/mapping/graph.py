@@ -27,7 +27,7 @@ import numpy.typing as npt
 
 from tagloc.geometry import SE3
 from tagloc.mapping.config import MapBuildConfig, OdometryNoise
-from tagloc.mapping.gtsam_bridge import PERM, cov_from_gtsam, diagonal_sigmas
+from tagloc.mapping.gtsam_bridge import PERM, cov_from_gtsam, diagonal_sigmas, solver_errors
 from tagloc.mapping.initialize import inverse_h, rotation_angle
 
 FloatArray = npt.NDArray[np.float64]
@@ -214,11 +214,15 @@ def marginal_covariances(solution: GraphSolution) -> GraphSolution:
     start = time.perf_counter()
     if solution.linear is not None:  # already in tagloc order
         # the solution only labels the variables: elimination does not need it
-        marginals = gtsam.Marginals(solution.linear, gtsam.VectorValues())
-        cov = {j: marginals.marginalCovariance(L(j)) for j in solution.M_map_tag}
+        with solver_errors("the tag covariances"):
+            marginals = gtsam.Marginals(solution.linear, gtsam.VectorValues())
+            cov = {j: marginals.marginalCovariance(L(j)) for j in solution.M_map_tag}
     else:
-        marginals = gtsam.Marginals(solution.graph, solution.values)
-        cov = {j: cov_from_gtsam(marginals.marginalCovariance(L(j))) for j in solution.M_map_tag}
+        with solver_errors("the tag covariances"):
+            marginals = gtsam.Marginals(solution.graph, solution.values)
+            cov = {
+                j: cov_from_gtsam(marginals.marginalCovariance(L(j))) for j in solution.M_map_tag
+            }
     return replace(solution, cov_map_tag=cov, marginals_s=time.perf_counter() - start)
 
 
@@ -227,7 +231,8 @@ def solve_graph(data: GraphInput, config: MapBuildConfig) -> GraphSolution:
     graph, values = build_graph(data, config)
     optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, lm_params(config))
     start = time.perf_counter()
-    result = optimizer.optimize()
+    with solver_errors("the survey graph"):
+        result = optimizer.optimize()
     optimize_s = time.perf_counter() - start
     n_kf = len(data.M_map_base_init)
     M_map_base = np.array([result.atPose3(X(k)).matrix() for k in range(n_kf)])

@@ -42,6 +42,7 @@ from tagloc.mapping.corner_graph import (
 )
 from tagloc.mapping.flips import flip_stuck_tags
 from tagloc.mapping.graph import GraphSolution, L, X, odometry_sigmas
+from tagloc.mapping.gtsam_bridge import solver_errors
 from tagloc.mapping.initialize import inverse_h, rotation_angle
 from tagloc.mapping.observations import Observations
 from tagloc.mapping.odometry_factors import (
@@ -224,7 +225,8 @@ def refine_with_corners(
         linear = problem.linearize(state)
         graph = linear[0]
         t = time.perf_counter()
-        delta = graph.optimize()
+        with solver_errors("the corner refinement"):
+            delta = graph.optimize()
         solve_s += time.perf_counter() - t
         alpha, new, new_cost = 1.0, state, cost
         for _ in range(_LINE_SEARCH_STEPS):
