@@ -144,3 +144,30 @@ def test_realtime_runs_the_live_order_and_reports_its_latency(tmp_path: Path) ->
     # the frames come as detections (no worker, no drops): the fixes are those of the replay
     # (69 on this stretch), applied one odometry sample later
     assert summary["fixes_accepted"] > 60
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (("--scenario", "default", "--duration", "nan"), "--duration nan: expected a finite"),
+        (("--scenario", "default", "--seed", "-1"), "--seed -1: expected an integer >= 0"),
+        (("--scenario", "default", "--realtime", "--speed", "0"), "--speed 0: expected"),
+    ],
+)
+def test_bad_options_are_one_line_before_any_work(
+    tmp_path: Path, args: tuple[str, ...], message: str
+) -> None:
+    out = tmp_path / "out"
+    done = run_tagloc("localize", *args, "--out", str(out))
+    assert done.returncode == 1 and message in done.stderr, done.stderr
+    assert not out.exists()
+
+
+def test_an_existing_directory_in_place_of_an_output_file_is_kept(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    (out / "fused.tum").mkdir(parents=True)
+    (out / "fused.tum" / "keep.txt").write_text("mine")
+    done = run_tagloc("localize", "--scenario", "default", "--duration", "5", "--out", str(out))
+    assert done.returncode == 1 and "fused.tum" in done.stderr, done.stderr
+    assert (out / "fused.tum" / "keep.txt").read_text() == "mine"
+    assert sorted(p.name for p in out.iterdir()) == ["fused.tum"]

@@ -11,7 +11,6 @@ Each file is renamed into place only when the run ends well; on a failure nothin
 from __future__ import annotations
 
 import logging
-import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,12 +18,20 @@ from typing import TYPE_CHECKING, Annotated, Literal
 
 import typer
 
+from tagloc.cli.options import duration_range, in_range, seed_range
+from tagloc.fileutil import check_outputs
+
 if TYPE_CHECKING:
     from tagloc.localize.config import LocalizerConfig
     from tagloc.localize.node import LocalizerNode
     from tagloc.messages import Message
 
 logger = logging.getLogger(__name__)
+#: Files ``tagloc localize`` writes into ``--out``.
+OUTPUT_FILES = (
+    "fused.tum", "odometry.tum", "truth.tum", "events.jsonl", "fixes.jsonl", "status.jsonl",
+    "localization.mcap", "summary.json", "summary.txt", "localizer.yaml",
+)  # fmt: skip
 
 
 def write_stream_bag(
@@ -55,14 +62,18 @@ def localize(
     image_topic: Annotated[str, typer.Option(help="Images.")] = "/camera/image",
     camera_info_topic: Annotated[str, typer.Option(help="CameraInfo.")] = "/camera/camera_info",
     truth_topic: Annotated[str, typer.Option(help="Ground truth.")] = "/ground_truth",
-    seed: Annotated[int, typer.Option(help="Scenario seed.")] = 0,
-    duration: Annotated[float | None, typer.Option(help="Scenario: first N s only.")] = None,
+    seed: Annotated[int, typer.Option(help="Scenario seed.", callback=seed_range)] = 0,
+    duration: Annotated[
+        float | None, typer.Option(help="Scenario: first N s only.", callback=duration_range)
+    ] = None,
     tf_topic: Annotated[str, typer.Option(help="Odometry as /tf (odom -> base).")] = "/tf",
     no_bag: Annotated[bool, typer.Option("--no-bag", help="No localization.mcap.")] = False,
     realtime: Annotated[
         bool, typer.Option("--realtime", help="Pace by the wall clock; detect on a worker.")
     ] = False,
-    speed: Annotated[float | None, typer.Option(help="With --realtime: speed factor.")] = 1.0,
+    speed: Annotated[
+        float, typer.Option(help="With --realtime: speed factor.", callback=in_range(gt=0, le=1e3))
+    ] = 1.0,
 ) -> None:  # fmt: skip
     """Localize a bag or a simulated scenario against a tag map, streaming every output to files."""
     from rich.console import Console
@@ -71,14 +82,10 @@ def localize(
 
     if (bag is None) == (scenario is None):
         raise LocalizeError("give exactly one input: a bag path or --scenario NAME")
-    if duration is not None and not (math.isfinite(duration) and duration > 0):
-        raise LocalizeError(f"--duration: must be a positive number of seconds, got {duration}")
-    if speed is not None and not (math.isfinite(speed) and speed > 0):
-        raise LocalizeError(f"--speed: must be a positive factor, got {speed}")
-    if seed < 0:
-        raise LocalizeError(f"--seed: must be >= 0, got {seed}")
-    if out.exists() and not out.is_dir():
-        raise LocalizeError(f"--out: {out} exists and is not a directory")
+    check_outputs(
+        {"--out": out}, directories={"--out": OUTPUT_FILES},
+        inputs={"BAG": bag, "--tags": tags, "--config": config, "--cameras": cameras},
+    )  # fmt: skip
     cfg = None if config is None else load_localizer_config(config)
 
     topics = (odom_topic, detections_topic, image_topic, camera_info_topic, truth_topic, tf_topic)
