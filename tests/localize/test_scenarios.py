@@ -57,10 +57,11 @@ def correction_jumps(run: LocalizationRun) -> np.ndarray:
 def default_pipeline() -> tuple[LocalizationRun, LocalizationPipeline]:
     scenario = build_scenario("default", seed=0, duration_s=90.0)
     source = ScenarioSource(scenario)
-    pipe = LocalizationPipeline(
-        scenario.tag_map, calibrated_config(scenario, scenario_config()),
-        frame_truth=source.frame_truth,
-    )  # fmt: skip
+    config = calibrated_config(scenario, scenario_config())
+    # every published correction kept, for the cap test (the default keeps the last 1000)
+    keep_all = config.filter.model_copy(update={"history_size": 1_000_000})
+    config = config.model_copy(update={"filter": keep_all})
+    pipe = LocalizationPipeline(scenario.tag_map, config, frame_truth=source.frame_truth)
     return pipe.run(source), pipe
 
 

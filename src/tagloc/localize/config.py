@@ -155,8 +155,9 @@ class FilterConfig(StrictModel):
     #: a kidnap, a poor prior) iterate.
     max_iterations: int = Field(3, ge=1, le=20)
     relinearize_tol: float = Field(0.05, gt=0, le=1e6)
-    #: Published corrections kept for ``correction_at``.
-    history_size: int = Field(10_000, ge=1, le=10_000_000)
+    #: Published corrections kept for ``correction_at`` (a new one at each fix and each drift
+    #: step: 1000 are 30-60 s of driving; the node itself asks only for the newest).
+    history_size: int = Field(1000, ge=1, le=10_000_000)
     #: Events kept in the filter's log for inspection (counts are always exact; every event
     #: also streams to the node's sinks as it happens).
     max_events: int = Field(1000, ge=1, le=10_000_000)
