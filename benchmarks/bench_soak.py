@@ -95,7 +95,9 @@ def main() -> None:
     config = calibrated_config(scenario, scenario_config())
     node = LocalizerNode(scenario.tag_map, config, [CountingSink()], frame_truth=source.frame_truth)
     n_odom, n_frames = len(scenario.drive.stamps_ns), len(source.frames)
-    print(f"{args.minutes:g} min of stream: {n_odom} odometry samples at 200 Hz, {n_frames} "
+    span_min = (scenario.drive.stamps_ns[-1] - scenario.drive.stamps_ns[0]) / S / 60
+    print(f"{span_min:.1f} min of stream (asked: {args.minutes:g}; a simulated drive holds at "
+          f"most 500 000 odometry samples): {n_odom} odometry samples at 200 Hz, {n_frames} "
           f"camera frames at 30 Hz (built in {build_s:.0f} s)")  # fmt: skip
     header = (f"{'minute':>6} | {'traced MB':>9} | {'peak MB':>8} | {'RSS MB':>7} | "
               f"{'odometry feed ms p50/p99/max':>28} | {'frame feed ms p50/p99/max':>26} | "
