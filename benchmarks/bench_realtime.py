@@ -37,6 +37,7 @@ from collections.abc import Iterator
 import cv2
 import numpy as np
 
+from bench_detect import pin_one_core  # the same pinning as the detector benchmark
 from tagloc.localize.node import LocalizerNode
 from tagloc.localize.outputs import RunRecorder
 from tagloc.localize.pipeline import LocalizationPipeline
@@ -66,15 +67,6 @@ from tagloc.tags import make_detector
 
 SEED = 1
 ODOM_COV = np.eye(6) * 1e-4
-
-
-def pin_one_core() -> str:
-    """Pin this process to one CPU (Linux); returns a description."""
-    if hasattr(os, "sched_setaffinity"):
-        cpu = min(os.sched_getaffinity(0))
-        os.sched_setaffinity(0, {cpu})
-        return f"pinned to CPU {cpu}"
-    return "not pinned (no sched_setaffinity)"
 
 
 def build(seconds: float, odom_hz: float) -> tuple[Scenario, list[ImageMsg]]:

@@ -49,6 +49,9 @@ class EventKind(StrEnum):
     SOURCE_CLEARED = "source_cleared"
 
 
+#: Decisions that apply a fix (accepted, or used to (re)initialize the state).
+APPLIED = frozenset({"accepted", "initialized", "reinitialized_kidnap"})
+
 #: Kinds logged at INFO (state changes an operator wants to see); WARNING for suspects.
 _INFO = {
     EventKind.INITIALIZED,

@@ -26,6 +26,7 @@ odometry, and fixes within the consistency window; everything else leaves throug
 
 from __future__ import annotations
 
+import dataclasses
 import heapq
 import logging
 import math
@@ -279,22 +280,23 @@ class LocalizerNode(CameraFrames):
         if stamp < self._tick_ns:
             return
         self._tick_ns = stamp
-        state = self._state(stamp, self._cov_last if self.filter.initialized else None)
+        state = self._state(stamp)
         move = self.supervisor.step(stamp, state, reason)
         if move is not None:
             self._emit(move)
-        if self.supervisor.status_due(stamp):
+        if self.supervisor.status_due(stamp):  # the sigmas only for the status (not per tick)
+            cov = self._cov_last if self.filter.initialized else None
+            if cov is not None:
+                sxy = math.sqrt(max(float(np.linalg.eigvalsh(cov[:2, :2])[-1]), 0.0))
+                syaw = math.degrees(math.sqrt(max(float(cov[5, 5]), 0.0)))
+                state = dataclasses.replace(state, sigma_xy_m=sxy, sigma_yaw_deg=syaw)
             self._emit(self.supervisor.status(stamp, state))
 
-    def _state(self, stamp: int, cov: np.ndarray | None) -> EstimatorState:
-        flt = self.filter
+    def _state(self, stamp: int) -> EstimatorState:
+        """What the supervisor needs of the estimate at ``stamp`` (sigmas left NaN)."""
         since_s = math.inf if self._fix_ns is None else (stamp - self._fix_ns) / S_NS
         since_m = math.inf if self._fix_ns is None else self._odometer_m - self._fix_odometer_m
-        sxy = syaw = math.nan
-        if cov is not None:
-            sxy = math.sqrt(max(float(np.linalg.eigvalsh(cov[:2, :2])[-1]), 0.0))
-            syaw = math.degrees(math.sqrt(max(float(cov[5, 5]), 0.0)))
-        return EstimatorState(flt.initialized, flt.reacquiring, since_s, since_m, sxy, syaw)
+        return EstimatorState(self.filter.initialized, self.filter.reacquiring, since_s, since_m)
 
     def _clock_jump(self, stamp: int) -> None:
         """Odometry stamped far before the last one: the clock jumped back (a restarted driver, a
@@ -340,7 +342,7 @@ class LocalizerNode(CameraFrames):
         ladder = self.supervisor.ladder
         return {
             "odometry_calibration": calib, "skipped": dict(self.skipped), "event_counts": counts,
-            "suspect_sources": list(flt.suspect_sources),
+            "suspect_sources": list(flt.suspect_sources), "clock_jumps": self.clock_jumps,
             "config": self.config.model_dump(mode="json"),
             "cap_translation_m": self.config.cap.max_translation_m,
             "cap_rotation_deg": self.config.cap.max_rotation_deg,

@@ -21,7 +21,7 @@ import numpy as np
 
 from tagloc.errors import TransformLookupError
 from tagloc.geometry import SE3
-from tagloc.localize.events import EventKind, FilterEvent
+from tagloc.localize.events import APPLIED, EventKind, FilterEvent
 from tagloc.localize.fiducial import FiducialConfig, FiducialFixSource, FrameFixes
 from tagloc.localize.run import CameraFrameRecord, FixAttempt
 from tagloc.messages import ImageMsg
@@ -44,7 +44,6 @@ __all__ = ["MARKERS", "CameraFrames"]
 
 logger = logging.getLogger(__name__)
 MARKERS = "markers"
-_FINAL = {EventKind.ACCEPTED, EventKind.INITIALIZED, EventKind.REINITIALIZED_KIDNAP}
 #: Camera frames that may wait for odometry to cover their stamp (30 s at 30 Hz).
 _MAX_PENDING = 900
 #: Frame stamps remembered to refuse duplicates (a bounded set of the newest).
@@ -249,7 +248,7 @@ class CameraFrames:
 
     def _judged(self, event: FilterEvent, reproj_px: float) -> None:
         """A final decision on a fix: the supervisor's quality books, the last accepted fix."""
-        accepted = event.kind in _FINAL
+        accepted = event.kind.value in APPLIED
         if accepted:
             self._fix_ns = max(self._fix_ns or event.stamp_ns, event.stamp_ns)
             self._fix_odometer_m = self._odometer_m

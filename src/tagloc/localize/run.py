@@ -27,7 +27,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tagloc.geometry import SE3
-from tagloc.localize.events import FilterEvent
+from tagloc.localize.events import APPLIED, FilterEvent
 from tagloc.supervise import LadderTransition
 
 __all__ = ["CameraFrameRecord", "FixAttempt", "LocalizationRun"]
@@ -75,7 +75,7 @@ class FixAttempt:
     @property
     def accepted(self) -> bool:
         """Whether the filter accepted (or initialized from) the fix."""
-        return self.decision in ("accepted", "initialized", "reinitialized_kidnap")
+        return self.decision in APPLIED
 
 
 @dataclass(frozen=True, slots=True)
