@@ -78,6 +78,20 @@ def _kind_names(kinds: tuple[type[Message], ...]) -> str:
     return ", ".join(k.__name__ for k in kinds) or "every message"
 
 
+def _windowed(
+    fault: DropMessages | DuplicateMessages, stream: Stream, t0_ns: int
+) -> Iterator[tuple[str, Message, bool]]:
+    """Each message and whether the fault's window and kinds hit it (logged once)."""
+    lo, hi = t0_ns + round(fault.start_s * S_NS), t0_ns + round(fault.end_s * S_NS)
+    logged = False
+    for topic, msg in stream:
+        hit = lo <= msg.stamp_ns < hi and _matches(msg, fault.kinds)
+        if hit and not logged:
+            logger.info("fault: %s", fault.describe())
+            logged = True
+        yield topic, msg, hit
+
+
 @dataclass(frozen=True, slots=True)
 class DropMessages:
     """Messages of ``kinds`` stamped in ``[start_s, end_s)`` are lost (a sensor unplugged, a
@@ -96,15 +110,9 @@ class DropMessages:
     kinds: tuple[type[Message], ...] = ()
 
     def apply(self, stream: Stream, t0_ns: int) -> Iterator[tuple[str, Message]]:
-        lo, hi = t0_ns + round(self.start_s * S_NS), t0_ns + round(self.end_s * S_NS)
-        logged = False
-        for topic, msg in stream:
-            if lo <= msg.stamp_ns < hi and _matches(msg, self.kinds):
-                if not logged:
-                    logger.info("fault: %s", self.describe())
-                    logged = True
-                continue
-            yield topic, msg
+        for topic, msg, hit in _windowed(self, stream, t0_ns):
+            if not hit:
+                yield topic, msg
 
     def describe(self) -> str:
         return f"{_kind_names(self.kinds)} dropped from {self.start_s:g} s to {self.end_s:g} s"
@@ -128,14 +136,9 @@ class DuplicateMessages:
     kinds: tuple[type[Message], ...] = ()
 
     def apply(self, stream: Stream, t0_ns: int) -> Iterator[tuple[str, Message]]:
-        lo, hi = t0_ns + round(self.start_s * S_NS), t0_ns + round(self.end_s * S_NS)
-        logged = False
-        for topic, msg in stream:
+        for topic, msg, hit in _windowed(self, stream, t0_ns):
             yield topic, msg
-            if lo <= msg.stamp_ns < hi and _matches(msg, self.kinds):
-                if not logged:
-                    logger.info("fault: %s", self.describe())
-                    logged = True
+            if hit:
                 yield topic, msg
 
     def describe(self) -> str:
