@@ -7,7 +7,13 @@ import pytest
 from lidar_scenes import box_room, scan
 
 from tagloc.geometry import SE3
-from tagloc.lidar import OccupancyConfig, build_occupancy, build_premap, voxel_downsample
+from tagloc.lidar import (
+    OccupancyConfig,
+    OccupancyGrid,
+    build_occupancy,
+    build_premap,
+    voxel_downsample,
+)
 
 SEED = 3
 LX, LY = 8.0, 6.0
@@ -25,6 +31,11 @@ def scans() -> list[tuple[SE3, np.ndarray]]:
     return out
 
 
+@pytest.fixture(scope="module")
+def grid(scans: list[tuple[SE3, np.ndarray]]) -> OccupancyGrid:
+    return build_occupancy(scans, OccupancyConfig())
+
+
 def _true_walls(centers_xy: np.ndarray, res: float) -> np.ndarray:
     x = centers_xy[..., 0] - 0.025
     y = centers_xy[..., 1] - 0.025
@@ -35,9 +46,8 @@ def _true_walls(centers_xy: np.ndarray, res: float) -> np.ndarray:
     return (on_x & inside_y) | (on_y & inside_x)
 
 
-def test_box_room_walls_and_free_inside(scans: list[tuple[SE3, np.ndarray]]) -> None:
+def test_box_room_walls_and_free_inside(grid: OccupancyGrid) -> None:
     config = OccupancyConfig()
-    grid = build_occupancy(scans, config)
     centers = grid.cell_centers()
     walls = _true_walls(centers, config.resolution_m)
     occupied = grid.occupied()
@@ -51,9 +61,8 @@ def test_box_room_walls_and_free_inside(scans: list[tuple[SE3, np.ndarray]]) -> 
     assert not grid.free()[outside].any() and not occupied[outside].any()
 
 
-def test_grid_layout_follows_map_server(scans: list[tuple[SE3, np.ndarray]]) -> None:
+def test_grid_layout_follows_map_server(grid: OccupancyGrid) -> None:
     """Row 0 is the top (largest y); the origin is the lower-left corner of the lower-left cell."""
-    grid = build_occupancy(scans, OccupancyConfig())
     height, width = grid.shape
     res = grid.resolution_m
     centers = grid.cell_centers()
