@@ -40,7 +40,7 @@ SMALL_GICP_TO_TAGLOC = np.array([3, 4, 5, 0, 1, 2])
 class RegistrationConfig(StrictModel):
     """How a scan is registered against a target (small_gicp)."""
 
-    voxel_m: float = Field(0.15, gt=0.0)
+    voxel_m: float = Field(0.25, gt=0.0)
     """Voxel edge (m) both clouds are downsampled to before registration."""
     max_correspondence_m: float = Field(1.0, gt=0.0)
     """Pairs farther apart than this (m) are outliers (not in the cost, not inliers)."""
