@@ -96,7 +96,10 @@ def analyse_hessian(hessian: npt.ArrayLike, config: DegeneracyConfig) -> Degener
     constrained = np.zeros(6, dtype=bool)
     for block, other in ((slice(0, 3), slice(3, 6)), (slice(3, 6), slice(0, 3))):
         schur = (
-            H[block, block] - H[block, other] @ np.linalg.pinv(H[other, other]) @ H[other, block]
+            H[block, block]
+            - H[block, other]
+            @ np.linalg.pinv(H[other, other], rcond=1e-9, hermitian=True)
+            @ H[other, block]
         )
         w, v = np.linalg.eigh(0.5 * (schur + schur.T))
         w = np.clip(w, 0.0, None)
