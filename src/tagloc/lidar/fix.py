@@ -2,8 +2,8 @@
 
 :func:`lidar_fix` reads as its steps: keep the finite points within range; register them (in
 ``base``, de-skewed) against the prepared premap from the prior ``T_map_base``; gate on the
-number of points, convergence, inlier fraction and point-to-plane RMS; find the constrained
-directions of the point-to-plane Hessian (:mod:`tagloc.lidar.degeneracy`); keep the
+number of points, inlier fraction and point-to-plane RMS (and convergence, if asked); find the
+constrained directions of the point-to-plane Hessian (:mod:`tagloc.lidar.degeneracy`); keep the
 registration's correction only along them (the pose along an unconstrained direction stays the
 prior's: "solution remapping", Zhang et al. ICRA 2016); and report the covariance of the
 constrained coordinates.
@@ -68,7 +68,9 @@ class LidarFixConfig(StrictModel):
     min_constrained: int = Field(1, ge=1, le=6)
     """Fewer constrained directions than this: rejected as degenerate."""
     require_converged: bool = False
-    """Reject a registration that did not converge within ``max_iterations``."""
+    """Reject a registration that did not converge within ``max_iterations``. Off by default: in
+    a corridor Gauss-Newton keeps sliding along the free axis in steps above its tolerance, while
+    the constrained directions have long settled (the remapping discards the sliding)."""
     covariance_model: Literal["sandwich", "scaled"] = "sandwich"
     """``sandwich``: heteroscedasticity-robust (default); ``scaled``: ``sigma^2 H^-1``."""
     covariance_inflation: float = Field(1.5, ge=1.0)
