@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from lidar_scenes import box_room, corridor, scan, surface
 
+from tagloc.errors import GeometryError
 from tagloc.geometry import SE3
 from tagloc.lidar import LidarFixConfig, Target, lidar_fix
 
@@ -135,3 +136,8 @@ def test_a_scan_of_somewhere_else_is_rejected(room_target: Target) -> None:
     points = scan(box_room(30.0, 20.0, 3.0), SE3.from_rotvec([0, 0, 0.2], [12, 9, 0.5]), rng)
     fix = lidar_fix(points, room_target, T_map_base, LidarFixConfig())
     assert fix.rejected is not None and fix.rejected.startswith("low inlier fraction")
+
+
+def test_points_of_the_wrong_shape_are_refused(room_target: Target) -> None:
+    with pytest.raises(GeometryError, match=r"points_base must have shape \(N, 3\)"):
+        lidar_fix(np.zeros((500, 2)), room_target, SE3.identity(), LidarFixConfig())

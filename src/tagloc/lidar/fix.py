@@ -41,8 +41,8 @@ import numpy.typing as npt
 from pydantic import Field
 
 from tagloc.config import StrictModel
+from tagloc.errors import GeometryError
 from tagloc.geometry import SE3, SO3
-from tagloc.lidar.cloud import finite_points
 from tagloc.lidar.degeneracy import DegeneracyConfig, analyse_hessian
 from tagloc.lidar.registration import Registration, RegistrationConfig, Target, register
 
@@ -118,9 +118,7 @@ def lidar_fix(
 ) -> LidarFix:
     """Register a de-skewed scan (``(N, 3)`` in ``base``) against ``target`` (the premap, map
     frame) from ``T_map_base_prior``; see the module docstring."""
-    points = finite_points(points_base)
-    distance = np.linalg.norm(points, axis=1)
-    points = points[(distance >= config.min_range_m) & (distance <= config.max_range_m)]
+    points = _in_range(points_base, config)
     if points.shape[0] == 0:
         return _rejected(T_map_base_prior, "empty scan (no finite point in range)")
     if points.shape[0] < config.min_points:
@@ -157,6 +155,19 @@ def lidar_fix(
         rejected=None,
         registration=reg,
     )
+
+
+def _in_range(points_base: npt.ArrayLike, config: LidarFixConfig) -> np.ndarray:
+    """``(M, 3)`` float64: the finite points between ``min_range_m`` and ``max_range_m``
+    (non-finite rows fail both comparisons)."""
+    array = np.asarray(points_base)
+    if array.size == 0:
+        return np.empty((0, 3))
+    if array.ndim != 2 or array.shape[1] != 3:
+        raise GeometryError(f"points_base must have shape (N, 3), got {array.shape}")
+    squared = np.einsum("ij,ij->i", array, array, dtype=np.float64)
+    keep = (squared >= config.min_range_m**2) & (squared <= config.max_range_m**2)
+    return np.asarray(array[keep], dtype=np.float64)
 
 
 def _remap(T_map_base_reg: SE3, T_map_base_prior: SE3, basis: np.ndarray) -> SE3:

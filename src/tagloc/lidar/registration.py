@@ -228,7 +228,15 @@ def _point_to_plane(
     normals_target = target.normals[nearest]
     distance = np.einsum("ij,ij->i", moved[inlier] - target.points[nearest], normals_target)
     normals_source = T_target_source.rotation.inverse().act(normals_target)
-    gradient = np.hstack([normals_source, np.cross(points_source[inlier], normals_source)])
+    p, n = points_source[inlier], normals_source
+    gradient = np.column_stack(
+        [
+            n,
+            p[:, 1] * n[:, 2] - p[:, 2] * n[:, 1],
+            p[:, 2] * n[:, 0] - p[:, 0] * n[:, 2],
+            p[:, 0] * n[:, 1] - p[:, 1] * n[:, 0],
+        ]
+    )  # [n, p x n]
     rmse = float(np.sqrt(np.mean(distance**2)))
     sigma = float(1.4826 * np.median(np.abs(distance)))
     clipped = np.minimum(np.abs(distance), 3.0 * sigma)
