@@ -50,7 +50,9 @@ class RegistrationConfig(StrictModel):
     """Threads small_gicp may use (1: the node shares its core with the other fix sources)."""
     kernel: Literal["GICP", "PLANE_ICP", "ICP"] = "GICP"
     """The per-pair cost: ``GICP`` (distribution to distribution, default), ``PLANE_ICP``
-    (point to plane) or ``ICP`` (point to point)."""
+    (point to plane) or ``ICP`` (point to point: biased between two differently sampled clouds,
+    1 deg off in the room of ``tests/lidar/test_registration.py`` where the others are within
+    0.1 deg; for comparison only)."""
     num_neighbors: int = Field(10, ge=5)
     """Neighbours used to estimate each point's covariance / normal."""
     rotation_epsilon_rad: float = Field(1e-4, gt=0.0)
