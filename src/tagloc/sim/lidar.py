@@ -19,7 +19,6 @@ Noise: the measured range is the true one plus ``N(0, range_sigma_m)``; sweep ``
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 
@@ -118,7 +117,11 @@ class LidarSimulator:
         ce = np.cos(el)
         # (columns, rings, 3) unit beam directions in the scanner frame
         self.directions_lidar = np.stack(
-            [np.cos(az)[:, None] * ce, np.sin(az)[:, None] * ce, np.broadcast_to(np.sin(el), (len(az), len(el)))],
+            [
+                np.cos(az)[:, None] * ce,
+                np.sin(az)[:, None] * ce,
+                np.broadcast_to(np.sin(el), (len(az), len(el))),
+            ],
             axis=-1,
         )
         self.column_offsets_s = config.column_offsets_s()
@@ -164,7 +167,11 @@ class LidarSimulator:
             level_group=rings if self._level else 0,
         )  # fmt: skip
         measured = cast.range_m + noise
-        keep = np.isfinite(cast.range_m) & (measured >= cfg.min_range_m) & (measured <= cfg.max_range_m)
+        keep = (
+            np.isfinite(cast.range_m)
+            & (measured >= cfg.min_range_m)
+            & (measured <= cfg.max_range_m)
+        )
         beams = np.flatnonzero(keep)
         points = measured[beams, None] * self.directions_lidar.reshape(-1, 3)[beams]
         intensity = np.array([_INTENSITY.get(int(k), 0.0) for k in range(5)])[cast.kind[beams]]
@@ -225,7 +232,9 @@ class LidarSimulator:
         directions = d_lidar @ T_map_lidar.rotation.matrix.T
         origins = np.broadcast_to(np.asarray(T_map_lidar.translation), directions.shape)
         cfg = self.config
-        cast = cast_rays(origins, directions, self.segments, cfg.max_range_m, max_bounces=cfg.max_bounces)
+        cast = cast_rays(
+            origins, directions, self.segments, cfg.max_range_m, max_bounces=cfg.max_bounces
+        )
         ok = np.isfinite(cast.range_m) & (cast.range_m >= cfg.min_range_m)
         return np.asarray(T_map_lidar.act(cast.range_m[ok, None] * d_lidar[ok])), cast
 
@@ -285,8 +294,3 @@ def premap_from_world(
     clouds = [sim.scan_at(T_map_base[int(i)])[0] for i in picks]
     merged = np.concatenate(clouds) if clouds else np.zeros((0, 3))
     return voxel_centroids(merged, voxel_m)
-
-
-def sweep_count(duration_s: float, rate_hz: float) -> int:
-    """Whole sweeps in ``duration_s``."""
-    return int(math.floor(duration_s * rate_hz + 1e-9))

@@ -226,7 +226,8 @@ class LidarConfig(StrictModel):
             raise FieldPathError(("vertical_fov_deg",), f"low {low} is above high {high}")
         if self.rings == 1 and low != high:
             raise FieldPathError(
-                ("vertical_fov_deg",), f"one ring needs low == high (e.g. [0, 0]), got {low}, {high}"
+                ("vertical_fov_deg",),
+                f"one ring needs low == high (e.g. [0, 0]), got {low}, {high}",
             )
         if self.rings > 1 and low == high:
             raise FieldPathError(("vertical_fov_deg",), f"{self.rings} rings need low < high")
