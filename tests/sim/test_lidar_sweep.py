@@ -71,7 +71,8 @@ def test_raw_points_deskewed_with_the_true_motion_land_on_the_walls(office_drive
     expected = sim.column_offsets_s[col]
     np.testing.assert_allclose(msg.time_offset_s, expected, atol=1e-7)
     assert np.all(np.diff(msg.time_offset_s) >= 0) and msg.time_offset_s.max() < 0.1
-    assert msg.stamp_ns == starts[k] and sweep.end_ns == starts[k] + S // 10
+    assert msg.stamp_ns == starts[k] and sweep.end_ns == msg.last_point_ns()
+    assert sweep.end_ns - starts[k] == round(float(np.float32(0.1 * 359 / 360)) * S)
     kinds = sweep.cast.kind[sweep.beam_index]
     assert set(np.unique(kinds)) <= {HIT_WALL, HIT_FLOOR}
 
@@ -129,7 +130,7 @@ def test_truth_premap_lies_on_the_walls_and_floor_one_point_per_voxel() -> None:
     assert surface_distance(premap, walls).max() < 0.1 * np.sqrt(3)
     keys = np.floor(premap / 0.1).astype(np.int64)
     assert len(np.unique(keys, axis=0)) == len(premap)
-    # both corridor walls are mapped along the stretch driven (x 2 .. 14 m)
+    # both corridor walls are mapped along the stretch driven and 40 m beyond
     for y in (8.8, 11.2):
         on = premap[np.abs(premap[:, 1] - y) < 0.1]
         assert on[:, 0].min() < 2.0 and on[:, 0].max() > 20.0

@@ -68,7 +68,9 @@ class Sweep:
     R_map_lidar, t_map_lidar : (C, 3, 3), (C, 3) float
         The scanner's true pose when each column fired (see :attr:`T_map_lidar`).
     end_ns : int
-        When the sweep ends (and a driver publishes it).
+        When the sweep ends: its last column fires (a driver publishes the sweep once its last
+        point is measured, ``msg.last_point_ns()``, which is this unless that column returned
+        nothing).
     """
 
     msg: PointCloudMsg
@@ -181,7 +183,7 @@ class LidarSimulator:
             int(start_ns), LIDAR_FRAME, points.astype(np.float32), intensity.astype(np.float32),
             offsets.astype(np.float32),
         )  # fmt: skip
-        end = int(start_ns) + self.period_ns
+        end = int(start_ns) + round(float(np.float32(self.column_offsets_s[-1])) * S_NS)
         return Sweep(msg, cast, beams, R, origins_c, end)
 
     def sweeps(

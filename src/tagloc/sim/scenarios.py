@@ -147,8 +147,8 @@ SCENARIOS: dict[str, ScenarioSpec] = {
     # lidar scenarios (the world's robot carries the lidar; tags are unaffected by glass)
     "glass_corridor": ScenarioSpec(
         "a 40 m corridor walled with glass on both sides and nothing behind it: the lidar sees "
-        "the floor and, within 40 m, the end walls only, so it cannot fix the position across "
-        "or (far from the ends) along the corridor; tags on the glass carry the localization",
+        "the floor and the two solid end walls only, which fix the position along the corridor "
+        "and not across it; tags on the glass carry the localization",
         world="glass_corridor",
     ),
     "mirrored_lobby": ScenarioSpec(
@@ -167,8 +167,9 @@ SCENARIOS: dict[str, ScenarioSpec] = {
         faults=(DropMessages(30.0, 50.0, (PointCloudMsg,)),),
     ),
     "long_corridor": ScenarioSpec(
-        "a 60 m straight corridor without doors and with tags only at its ends: lidar "
-        "constrains the position across the corridor and the heading, not along it",
+        "a 120 m straight corridor without doors, tags only near its ends: over its middle 40 m "
+        "the lidar sees two parallel walls and the floor (the end walls beyond its 40 m range), "
+        "which fix the position across the corridor and the heading, not along it",
         world="long_corridor",
     ),
 }
@@ -358,7 +359,8 @@ class ScenarioSource:
     stamp an ``OdometryMsg`` and a ``GroundTruthMsg``, per camera frame a ``TagDetectionsMsg``
     (before the odometry of the same stamp, as a bag's log-time order has it) and per lidar
     sweep a ``PointCloudMsg`` on ``topics.lidar`` (stamped at the sweep's start, delivered at its
-    end, before the odometry of that stamp; simulated lazily as the stream is read:
+    end: the time of its last point, ``last_point_ns()``, also the log time
+    :class:`~tagloc.io.BagSink` gives it; simulated lazily as the stream is read:
     :mod:`tagloc.sim.lidar`); then the scenario's ``faults`` rewrite that stream.
     :attr:`frame_truth` holds what only the simulator knows (glints, tags truly in view).
     """
@@ -418,12 +420,23 @@ class ScenarioSource:
         frames = iter(self.frames)
         frame = next(frames, None)
         for i, stamp in enumerate(drive.stamps_ns.tolist()):
-            while frame is not None and frame.stamp_ns <= stamp:  # arrival order = stamp order
-                yield t.detections, TagDetectionsMsg(frame.stamp_ns, CAMERA_FRAME, frame.detections)
-                frame = next(frames, None)
-            while sweep is not None and sweep.end_ns <= stamp:  # delivered when complete
-                yield t.lidar, sweep.msg
-                sweep = next(sweeps, None)
+            # frames arrive at their stamp, sweeps when complete, before the odometry of a stamp
+            while True:
+                t_frame = frame.stamp_ns if frame is not None else stamp + 1
+                t_sweep = sweep.msg.last_point_ns() if sweep is not None else stamp + 1
+                if min(t_frame, t_sweep) > stamp:
+                    break
+                if t_frame <= t_sweep:
+                    assert frame is not None
+                    yield (
+                        t.detections,
+                        TagDetectionsMsg(frame.stamp_ns, CAMERA_FRAME, frame.detections),
+                    )
+                    frame = next(frames, None)
+                else:
+                    assert sweep is not None
+                    yield t.lidar, sweep.msg
+                    sweep = next(sweeps, None)
             T = drive.T_odom_base[i]
             yield t.odom, OdometryMsg(stamp, ODOM_FRAME, BASE_FRAME, T, _ODOM_COV)
             yield t.truth, GroundTruthMsg(stamp, MAP_FRAME, drive.T_map_base[i])
