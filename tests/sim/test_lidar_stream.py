@@ -138,7 +138,7 @@ def sweep_at(name: str, x: float, **kw: float):  # type: ignore[no-untyped-def]
 
 
 def test_glass_corridor_returns_only_floor_and_end_walls() -> None:
-    scenario, sweep, p = sweep_at("glass_corridor", 20.0)
+    scenario, _, p = sweep_at("glass_corridor", 20.0)
     solid = p[np.abs(p[:, 2]) > 0.1]  # not the floor
     assert len(solid) > 0 and (np.minimum(solid[:, 0], 40.0 - solid[:, 0]) < 0.1).all()
     floor = p[np.abs(p[:, 2]) <= 0.1]

@@ -160,7 +160,7 @@ class LidarSimulator:
             glass = rng.random(columns * rings) < cfg.glass_return_probability
         cylinders = None
         if self.people:
-            t_s = (stamps - self.t0_ns) * 1e-9
+            t_s = ((stamps - self.t0_ns) * 1e-9).astype(np.float64)
             centre = np.repeat(people_xy(self._people_wp, t_s), rings, axis=0)
             cylinders = Cylinders(centre, self._radius, self._height)
         cast = cast_rays(
@@ -197,8 +197,9 @@ class LidarSimulator:
             knots = np.concatenate([self._knots(int(s)) for s in chunk])
             table = np.asarray(xy_yaw_at(knots), dtype=np.float64)
             for i, start in enumerate(chunk.tolist()):
-                rows = table[i * _KNOTS : (i + 1) * _KNOTS]
-                yield self.sweep(lambda _, rows=rows: rows, start, first_index + lo + i)
+                yield self.sweep(
+                    _Table(table[i * _KNOTS : (i + 1) * _KNOTS]), start, first_index + lo + i
+                )
 
     def _knots(self, start_ns: int) -> npt.NDArray[np.int64]:
         last = start_ns + round(float(self.column_offsets_s[-1]) * S_NS)
@@ -239,6 +240,16 @@ class LidarSimulator:
         )
         ok = np.isfinite(cast.range_m) & (cast.range_m >= cfg.min_range_m)
         return np.asarray(T_map_lidar.act(cast.range_m[ok, None] * d_lidar[ok])), cast
+
+
+@dataclass(frozen=True, slots=True)
+class _Table:
+    """A :data:`PoseFunction` returning poses already sampled at a sweep's knots."""
+
+    rows: FloatArray
+
+    def __call__(self, stamps_ns: npt.NDArray[np.int64]) -> FloatArray:
+        return self.rows
 
 
 def voxel_centroids(points: FloatArray, voxel_m: float) -> FloatArray:

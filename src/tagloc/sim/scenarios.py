@@ -296,7 +296,7 @@ def _crowd(drive: Drive, fraction: float, seed: int) -> tuple[Person, ...]:
     """People walking with the robot's true path (sampled every 0.5 s), times after t0."""
     stamps = np.arange(int(drive.stamps_ns[0]), int(drive.stamps_ns[-1]) + S_NS, S_NS // 2)
     truth = drive.ground_truth_at(stamps)
-    t_s = (stamps - drive.t0_ns) * 1e-9
+    t_s = ((stamps - drive.t0_ns) * 1e-9).astype(np.float64)
     return crowd_around(truth.xy_yaw_map_base, t_s, fraction, seed=seed)
 
 
