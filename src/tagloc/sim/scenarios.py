@@ -17,7 +17,16 @@ camera_unplugged, odometry_stall, clock_jump_back, duplicated_messages
               stream-level ``faults`` (:mod:`tagloc.sim.faults`, whose table gives the ladder
               walk each must produce): frames lost, odometry stalled, its clock jumping back,
               messages sent twice
+glass_corridor  (world ``glass_corridor``) glass on both sides: the lidar sees floor and end walls
+mirrored_lobby  (world ``mirrored_lobby``) a mirror wall: phantom lidar geometry behind it
+crowd         people walking with the robot hide ``crowd_fraction`` (45 %) of the lidar's beams
+lidar_unplugged  no ``PointCloudMsg`` from 30 s to 50 s (a ``DropMessages`` fault)
+long_corridor  (world ``long_corridor``) 120 m without doors, tags only near the ends
 ============  ===================================================================================
+
+Every scenario streams the lidar when its world's robot has one (all built-in worlds do):
+:class:`ScenarioSource` yields the sweeps of :mod:`tagloc.sim.lidar`, occluded by the world's and
+the scenario's people.
 
 Pure: the same name, seed and duration give the same scenario.
 """
