@@ -39,6 +39,7 @@ from tagloc.sim.lidar_cast import (
 )
 from tagloc.sim.people import Person, people_xy
 from tagloc.sim.robot import LidarConfig
+from tagloc.sim.world import Wall, World
 
 __all__ = ["LIDAR_FRAME", "LidarSimulator", "Sweep", "premap_from_world", "voxel_centroids"]
 
@@ -103,7 +104,7 @@ class LidarSimulator:
     def __init__(
         self,
         config: LidarConfig,
-        walls: Sequence[object],
+        walls: Sequence[Wall],
         people: Sequence[Person] = (),
         t0_ns: int = 0,
     ) -> None:
@@ -266,7 +267,7 @@ def voxel_centroids(points: FloatArray, voxel_m: float) -> FloatArray:
 
 
 def premap_from_world(
-    world: object,
+    world: World,
     T_map_base: SE3,
     *,
     config: LidarConfig | None = None,
@@ -296,10 +297,10 @@ def premap_from_world(
     ValueError
         If neither ``config`` nor the world's robot has a lidar.
     """
-    config = config or world.robot.lidar  # type: ignore[attr-defined]
+    config = config or world.robot.lidar
     if config is None:
         raise ValueError("premap_from_world: the world's robot has no lidar; pass config=")
-    sim = LidarSimulator(config, world.walls_in_map())  # type: ignore[attr-defined]
+    sim = LidarSimulator(config, world.walls_in_map())
     xy = np.asarray(T_map_base.translation).reshape(-1, 3)[:, :2]
     travelled = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))])
     marks = np.floor(travelled / every_m)
