@@ -24,6 +24,7 @@ from tagloc.sim.scenarios import (
     ScenarioSource,
     build_scenario,
     localize_scenario,
+    scenario_premap,
 )
 from tagloc.sim.world import load_default_world
 
@@ -182,3 +183,16 @@ def test_lidar_unplugged_stream_has_a_20_s_gap() -> None:
     assert ((stamps >= t0 + 30 * S) & (stamps < t0 + 50 * S)).sum() == 0
     assert np.diff(stamps).max() == 20 * S + S // 10
     assert dataclasses.is_dataclass(fault := SCENARIOS["lidar_unplugged"].faults[0]) and fault
+
+
+def test_a_crowd_scenario_premap_holds_walls_and_floor_but_no_people() -> None:
+    scenario = build_scenario("crowd", 0, 10.0)
+    premap = scenario_premap(scenario, every_m=1.0)
+    walls = scenario.world.walls_in_map()
+    a = np.array([w.start for w in walls])
+    ab = np.array([w.end for w in walls]) - a
+    p = premap[np.abs(premap[:, 2]) > 0.1][:, None, :2]  # off the floor
+    s = np.clip(((p - a) * ab).sum(-1) / (ab**2).sum(-1), 0.0, 1.0)
+    dist = np.linalg.norm(p - (a + s[..., None] * ab), axis=-1).min(axis=1)
+    behind_mirror = p[:, 0, 0] > 37.6  # the cab's mirror walls add phantoms (none in 10 s)
+    assert len(p) > 1000 and (dist[~behind_mirror] < 0.1).all()

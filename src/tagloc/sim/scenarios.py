@@ -58,7 +58,7 @@ from tagloc.messages import (
 )
 from tagloc.sim.drive import Drive, simulate_drive
 from tagloc.sim.faults import ClockJump, DropMessages, DuplicateMessages, StreamFault, apply_faults
-from tagloc.sim.lidar import LIDAR_FRAME, LidarSimulator, Sweep
+from tagloc.sim.lidar import LIDAR_FRAME, LidarSimulator, Sweep, premap_from_world
 from tagloc.sim.observations import ObservationConfig, simulate_observations
 from tagloc.sim.people import Person, crowd_around
 from tagloc.sim.trajectory import Trajectory
@@ -75,6 +75,7 @@ __all__ = [
     "build_scenario",
     "localize_scenario",
     "run_scenario",
+    "scenario_premap",
     "tag_map_from_world",
     "truncate_drive",
 ]
@@ -237,6 +238,24 @@ def tag_map_from_world(world: World) -> TagMap:
     return TagMap.from_entries(
         TagEntry.from_pose(t.id, world.T_map_tag(t), t.size, family=t.family, note=t.note or "")
         for t in world.tags
+    )
+
+
+def scenario_premap(
+    scenario: Scenario, *, every_m: float = 0.5, voxel_m: float = 0.1
+) -> npt.NDArray[np.float64]:
+    """The true lidar premap of a scenario, as :func:`tag_map_from_world` is its true tag map:
+    :func:`~tagloc.sim.lidar.premap_from_world` of the world along the drive's ground truth
+    (scans every ``every_m`` of travel, no people, no noise; ``voxel_m`` cubes), ``(N, 3)`` in
+    ``map``, metres.
+
+    Raises
+    ------
+    ValueError
+        If the world's robot has no lidar.
+    """
+    return premap_from_world(
+        scenario.world, scenario.drive.T_map_base, every_m=every_m, voxel_m=voxel_m
     )
 
 
