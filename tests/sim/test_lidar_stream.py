@@ -100,6 +100,8 @@ def test_the_localizer_ignores_the_lidar() -> None:
     np.testing.assert_array_equal(with_lidar.stamps_ns, without.stamps_ns)
     np.testing.assert_array_equal(with_lidar.T_map_base.as_matrix(), without.T_map_base.as_matrix())
     assert sum(f.accepted for f in with_lidar.fixes) == sum(f.accepted for f in without.fixes) > 0
+    assert with_lidar.metadata["lidar"] == "16 rings x 360 columns, -7 to 52 deg, 360 deg, 10 Hz"
+    assert without.metadata["lidar"] is None and without.metadata["people"] == 0
 
 
 def test_sim_record_writes_the_sweeps_in_arrival_order(tmp_path: Path, short) -> None:  # type: ignore[no-untyped-def]

@@ -558,4 +558,16 @@ def scenario_metadata(scenario: Scenario, source: ScenarioSource) -> dict[str, o
         "duration_s": float(scenario.drive.stamps_ns[-1] - scenario.drive.stamps_ns[0]) / S_NS,
         "n_camera_frames": len(source.frames), "glints_injected": int(glints),
         "world": scenario.world.name, "faults": [f.describe() for f in scenario.faults],
+        "lidar": _lidar_summary(scenario), "people": len(scenario.people),
     }  # fmt: skip
+
+
+def _lidar_summary(scenario: Scenario) -> str | None:
+    lidar = scenario.world.robot.lidar
+    if lidar is None:
+        return None
+    low, high = lidar.vertical_fov_deg
+    return (
+        f"{lidar.rings} rings x {lidar.columns} columns, {low:g} to {high:g} deg, "
+        f"{lidar.horizontal_fov_deg:g} deg, {lidar.rate_hz:g} Hz"
+    )
