@@ -41,6 +41,8 @@ from dataclasses import replace
 import numpy as np
 
 from tagloc.geometry import SE3
+from tagloc.mapping.advice import coverage_gaps, uncertainty_advice
+from tagloc.mapping.anchors import Anchor, anchor_default_sigmas, as_anchor
 from tagloc.mapping.calibration import (
     OdometryCalibration,
     apply_calibration,
@@ -49,14 +51,18 @@ from tagloc.mapping.calibration import (
     fit_calibration,
 )
 from tagloc.mapping.config import MapBuildConfig
+from tagloc.mapping.exclude import survey_start_ns
 from tagloc.mapping.graph import (
     GraphInput,
     GraphSolution,
     build_graph,
     held_tags,
     marginal_covariances,
+    odometry_sigmas,
     solve_graph,
 )
+from tagloc.mapping.graph_export import GraphAtSolution, factor_records
+from tagloc.mapping.gravity import map_tilt_deg, up_in_base
 from tagloc.mapping.gtsam_bridge import SolverError
 from tagloc.mapping.initialize import (
     choose_branches,
@@ -65,8 +71,15 @@ from tagloc.mapping.initialize import (
     inverse_h,
 )
 from tagloc.mapping.observations import Observations, collect_observations
-from tagloc.mapping.refine import State, refine_and_test_tilts
-from tagloc.mapping.report import BuildReport, TagQA, reprojection_residuals, rms
+from tagloc.mapping.refine import Priors, State, refine_and_test_tilts
+from tagloc.mapping.report import (
+    BuildReport,
+    TagQA,
+    corner_residuals_px,
+    reprojection_residuals,
+    rms,
+    tag_sigmas,
+)
 from tagloc.mapping.survey import MappingError, Survey, TagKey
 from tagloc.tags.tagmap import DEFAULT_FAMILY, TagEntry, TagMap
 
@@ -74,21 +87,26 @@ logger = logging.getLogger(__name__)
 
 #: ``progress(stage, done, total)``; stages ``"pnp"``, ``"optimize"``.
 ProgressFn = Callable[[str, int, int], None]
-Anchors = Mapping[int, SE3] | Mapping[TagKey, SE3]
+Anchors = Mapping[int, SE3 | Anchor] | Mapping[TagKey, SE3 | Anchor]
 
 
-def _anchor_indices(anchors: Anchors, obs: Observations, source: str) -> dict[int, np.ndarray]:
+def _anchor_indices(
+    anchors: Anchors, obs: Observations, source: str, config: MapBuildConfig
+) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray]]:
+    """Anchor poses and prior sigmas by tag index."""
     index = {key: j for j, key in enumerate(obs.tag_keys)}
-    result = {}
-    for key, T_map_tag in anchors.items():
+    result, sigmas = {}, {}
+    for key, value in anchors.items():
+        anchor = as_anchor(value)
         tag_key = key if isinstance(key, tuple) else (DEFAULT_FAMILY, int(key))
         if tag_key not in index:
             raise MappingError(
                 f"{source}: anchor tag {tag_key[0]}:{tag_key[1]} is never observed "
                 f"(observed: {', '.join(str(k[1]) for k in obs.tag_keys)})"
             )
-        result[index[tag_key]] = T_map_tag.as_matrix()
-    return result
+        result[index[tag_key]] = anchor.T_map_tag.as_matrix()
+        sigmas[index[tag_key]] = anchor.sigmas(config)
+    return result, sigmas
 
 
 def _graph_input(
@@ -98,6 +116,7 @@ def _graph_input(
     anchors: Mapping[int, np.ndarray],
     M_map_base: np.ndarray,
     M_map_tag: Mapping[int, np.ndarray],
+    priors: Priors,
 ) -> GraphInput:
     rows = np.arange(len(obs))
     return GraphInput(
@@ -109,6 +128,8 @@ def _graph_input(
         M_map_anchor=anchors,
         M_map_base_init=M_map_base,
         M_map_tag_init=M_map_tag,
+        anchor_sigmas=priors.anchor_sigmas,
+        up_base=priors.up_base,
     )
 
 
@@ -123,9 +144,10 @@ def build_tag_map(
     Parameters
     ----------
     survey : Survey
-    anchors : mapping of tag id (or (family, id)) to SE3, optional
-        Surveyed ``T_map_tag`` of anchor tags, held by tight priors. None or empty: the first
-        tag seen defines ``map`` (identity pose).
+    anchors : mapping of tag id (or (family, id)) to SE3 or Anchor, optional
+        Surveyed ``T_map_tag`` of anchor tags, held by priors with their sigmas
+        (:class:`~tagloc.mapping.anchors.Anchor`; a bare SE3: the configuration's sigmas). None
+        or empty: the first tag seen defines ``map`` (identity pose).
     config : MapBuildConfig, optional
     progress : callable, optional
         ``progress(stage, done, total)`` for a progress bar.
@@ -154,7 +176,9 @@ def build_tag_map(
     timings["observations"] = time.perf_counter() - t_start
     # 2. initial values
     t = time.perf_counter()
-    M_anchor = _anchor_indices(anchors, obs, survey.source)
+    M_anchor, anchor_sigmas = _anchor_indices(anchors, obs, survey.source, config)
+    up_base = up_in_base(obs.T_odom_base.as_matrix().reshape(-1, 4, 4))
+    priors = Priors(anchor_sigmas, up_base if config.gravity.aligned_odometry else None)
     M_map_base = initialize_keyframes(obs, M_anchor, config.max_ambiguity_for_init)
     M_map_tag = initialize_tags(obs, M_map_base, M_anchor)
     branch = choose_branches(obs, M_map_base, M_map_tag)
@@ -173,7 +197,7 @@ def build_tag_map(
         for round_ in range(n_rounds):
             if progress is not None:
                 progress("optimize", round_, n_rounds)
-            data = _graph_input(obs, M_odom_base, branch, M_anchor, M_map_base, M_map_tag)
+            data = _graph_input(obs, M_odom_base, branch, M_anchor, M_map_base, M_map_tag, priors)
             solution = solve_graph(data, config)
             iterations += solution.iterations
             optimize_s += solution.optimize_s
@@ -208,6 +232,7 @@ def build_tag_map(
                 survey.cameras,
                 survey.T_base_cam,
                 config,
+                priors,
             )
             iterations += solution.iterations
             optimize_s += solution.optimize_s
@@ -224,7 +249,7 @@ def build_tag_map(
             solution = marginal_covariances(solution)
         elif config.compute_covariance:
             data = _graph_input(
-                obs, M_odom_base, branch, M_anchor, solution.M_map_base, solution.M_map_tag
+                obs, M_odom_base, branch, M_anchor, solution.M_map_base, solution.M_map_tag, priors
             )
             graph, values = build_graph(data, config)
             at = replace(solution, graph=graph, values=values)
@@ -238,6 +263,19 @@ def build_tag_map(
     tag_map, report = _map_and_report(
         survey, obs, solution, set(M_anchor), M_map_base_odometry, config, set(ambiguous)
     )
+    object.__setattr__(report, "tilt_deg", map_tilt_deg(solution.M_map_base, up_base))
+    at_solution = GraphAtSolution(
+        survey.source, survey_start_ns(survey), obs.keyframe_stamps_ns, solution.M_map_base,
+        solution.M_map_tag, obs.tag_keys, obs.keyframe, obs.tag, obs.camera,
+        corner_residuals_px(
+            obs, solution.M_map_base, solution.M_map_tag, survey.cameras, survey.T_base_cam
+        ),
+        solution.mahalanobis, config.outlier_sigma, inverse_h(M_odom_raw[:-1]) @ M_odom_raw[1:],
+        state.c, odometry_sigmas(M_odom_raw, config.odometry), held,
+        {j: priors.anchor_sigmas.get(j, anchor_default_sigmas(config)) for j in held},
+        priors.up_base, float(np.radians(config.gravity.sigma_deg)),
+    )  # fmt: skip
+    object.__setattr__(report, "factors", tuple(factor_records(at_solution)))
     timings["report"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t_start
     object.__setattr__(report, "timings_s", timings)
@@ -267,18 +305,29 @@ def _map_and_report(
     outlier = solution.mahalanobis > config.outlier_sigma
     cams = np.array(obs.camera)
     entries, qa = [], []
+    sigma_m, sigma_deg = tag_sigmas(solution.cov_map_tag)
+    flagged = sorted(j for j, s in sigma_m.items() if s > config.uncertainty_flag_m)
+    advice = uncertainty_advice(
+        flagged,
+        coverage_gaps(solution.M_map_base[:, :3, 3], obs.keyframe_stamps_ns, obs.keyframe, obs.tag),
+        {j: M[:3, 3] for j, M in solution.M_map_tag.items()},
+        sorted(anchor_indices),
+        [str(key[1]) for key in obs.tag_keys],
+    )
     for j in sorted(solution.M_map_tag):
         family, tag_id = obs.tag_keys[j]
         idx = np.flatnonzero(obs.tag == j)
         n_out = int(outlier[idx].sum())
         disagreeing = n_out >= 3 and n_out > config.disagreeing_fraction * len(idx)
         cov = solution.cov_map_tag.get(j)
-        sigma = float(np.sqrt(np.trace(cov[:3, :3]))) if cov is not None else float("nan")
+        sigma = sigma_m.get(j, float("nan"))
         T_map_tag = SE3.from_matrix(solution.M_map_tag[j], normalize=True)
         note = (
             f"built from {len(idx)} observations"
+            + (f"; sigma {100 * sigma:.1f} cm, {sigma_deg[j]:.2f} deg" if j in sigma_m else "")
             + (f"; {n_out} disagree (moved or duplicated?)" if disagreeing else "")
             + ("; tilt ambiguous (seen only face-on or far)" if j in ambiguous else "")
+            + ("; uncertain" if j in advice else "")
         )
         entries.append(
             TagEntry.from_pose(
@@ -304,6 +353,9 @@ def _map_and_report(
                 j in anchor_indices,
                 disagreeing,
                 j in ambiguous,
+                sigma_deg.get(j, float("nan")),
+                j in advice,
+                advice.get(j, ""),
             )
         )
     inlier = ~outlier
@@ -325,5 +377,7 @@ def _map_and_report(
         iterations=solution.iterations,
         error_initial=solution.error_initial,
         error_final=solution.error_final,
+        gravity_priors=config.gravity.aligned_odometry,
+        uncertainty_flag_m=config.uncertainty_flag_m,
     )
     return TagMap.from_entries(entries), report
