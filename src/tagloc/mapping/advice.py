@@ -10,8 +10,8 @@ at the survey path around it:
   X and Y");
 - the distance to the nearest anchor ("add an anchor near tag X").
 
-Both are given (a gap only when it is at least :data:`MIN_GAP_M` long): a gap means the chain of tags is weak there; a far anchor means the whole chain
-is long. Pure computation on the solution's arrays.
+Both are given (a gap only when it is at least :data:`MIN_GAP_M` long): a gap means the chain
+of tags is weak there; a far anchor means the whole chain is long. Pure computation on arrays.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ IntArray = npt.NDArray[np.int64]
 class CoverageGap:
     """A stretch of survey path with no tag sighting, between keyframes ``start`` and ``end``.
 
-    ``length_m`` is the distance travelled; ``t0_s``, ``t1_s`` seconds from the first keyframe;
+    ``length_m`` is the distance travelled; ``t0_s``, ``t1_s`` seconds from the survey start;
     ``tags_before``, ``tags_after`` the tag indices sighted at its ends.
     """
 
@@ -46,7 +46,7 @@ class CoverageGap:
 
 
 def coverage_gaps(
-    positions: FloatArray, stamps_ns: IntArray, keyframe: IntArray, tag: IntArray
+    positions: FloatArray, stamps_ns: IntArray, keyframe: IntArray, tag: IntArray, t0_ns: int
 ) -> list[CoverageGap]:
     """The stretches between consecutive keyframes with a sighting, in path order.
 
@@ -57,6 +57,8 @@ def coverage_gaps(
     stamps_ns : (K,) int
     keyframe, tag : (M,) int
         Keyframe and tag index of every observation.
+    t0_ns : int
+        The survey start (times in the gaps are seconds from it).
     """
     step = np.linalg.norm(np.diff(positions, axis=0), axis=1)
     travelled = np.concatenate([[0.0], np.cumsum(step)])
@@ -64,7 +66,7 @@ def coverage_gaps(
     for k, j in zip(keyframe.tolist(), tag.tolist(), strict=True):
         seen.setdefault(k, set()).add(j)
     ks = sorted(seen)
-    t0 = int(stamps_ns[0])
+    t0 = int(t0_ns)
     return [
         CoverageGap(
             a,
@@ -74,13 +76,9 @@ def coverage_gaps(
             (int(stamps_ns[b]) - t0) * 1e-9,
             frozenset(seen[a]),
             frozenset(seen[b]),
-        )  # fmt: skip
+        )
         for a, b in zip(ks[:-1], ks[1:], strict=True)
     ]
-
-
-def _name(j: int, names: Sequence[str]) -> str:
-    return names[j]
 
 
 def uncertainty_advice(
@@ -113,7 +111,7 @@ def uncertainty_advice(
                     others,
                     key=lambda o: float(np.linalg.norm(tag_positions[o] - tag_positions[j])),
                 )
-                parts.append(f"add a tag between {names[j]} and {_name(other, names)} ({where})")
+                parts.append(f"add a tag between {names[j]} and {names[other]} ({where})")
             else:
                 parts.append(f"add a tag along the path next to {names[j]} ({where})")
         if anchors:

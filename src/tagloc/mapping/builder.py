@@ -309,7 +309,13 @@ def _map_and_report(
     flagged = sorted(j for j, s in sigma_m.items() if s > config.uncertainty_flag_m)
     advice = uncertainty_advice(
         flagged,
-        coverage_gaps(solution.M_map_base[:, :3, 3], obs.keyframe_stamps_ns, obs.keyframe, obs.tag),
+        coverage_gaps(
+            solution.M_map_base[:, :3, 3],
+            obs.keyframe_stamps_ns,
+            obs.keyframe,
+            obs.tag,
+            survey_start_ns(survey),
+        ),
         {j: M[:3, 3] for j, M in solution.M_map_tag.items()},
         sorted(anchor_indices),
         [str(key[1]) for key in obs.tag_keys],

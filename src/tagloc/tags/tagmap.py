@@ -12,8 +12,10 @@ map), ``position: [x, y, z]`` (m), ``quat_xyzw: [x, y, z, w]`` (unit within 1e-6
 normalized on load), and optionally ``anchor: true`` (surveyed pose, a prior of the map
 builder), ``anchor_sigma: {position_m, rotation_deg}`` (the survey's standard deviation per axis,
 metres and degrees; only on anchors; without it the builder's default), ``observations``
-(count from the builder), ``note`` (one line) and ``covariance`` (6x6 of the right perturbation ``T_frame_tag (+) [x, y, z, rx, ry, rz]``, m and rad; 6 rows of
-6 numbers, or 36 numbers; symmetric positive semi-definite).
+(count from the builder), ``note`` (one line) and ``covariance`` (6x6 of the right
+perturbation ``T_frame_tag (+) [x, y, z, rx, ry, rz]``, m and rad; 6 rows of 6 numbers, or 36
+numbers; symmetric positive semi-definite; the builder writes each tag's marginal covariance, and
+its note gives the sigmas in cm and degrees).
 
 Saving is stable (same map, same bytes): positions and sizes with 6 decimals (micrometres),
 quaternions with 9 (normalized, ``w >= 0``), covariances with 3 significant digits (symmetrized;
