@@ -60,7 +60,9 @@ def test_anchor_sigma_in_tags_yaml() -> None:
     assert back.tags[0].anchor_sigma is not None
     assert back.tags[0].anchor_sigma.rotation_deg == 0.5
     no_anchor = text.replace("    anchor: true\n", "")
-    with pytest.raises(TagMapError, match=r"x.yaml: tags\[0\] \(id 7\): anchor_sigma: only an anchor"):
+    with pytest.raises(
+        TagMapError, match=r"x.yaml: tags\[0\] \(id 7\): anchor_sigma: only an anchor"
+    ):
         TagMap.from_yaml_text(no_anchor, "x.yaml")
     with pytest.raises(TagMapError, match="anchor_sigma.position_m"):
         TagMap.from_yaml_text(text.replace("position_m: 0.003", "position_m: -1"), "x.yaml")

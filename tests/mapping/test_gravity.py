@@ -45,7 +45,9 @@ def _random_poses(rng: np.random.Generator, n: int) -> np.ndarray:
 def test_direction_error_matches_gtsam_attitude_factor() -> None:
     rng = np.random.default_rng(3)
     M_map_base = _random_poses(rng, 20)
-    M_odom_base = M_map_base @ SE3.from_rotvec(rng.normal(0, 0.05, (20, 3)), np.zeros((20, 3))).as_matrix()
+    M_odom_base = (
+        M_map_base @ SE3.from_rotvec(rng.normal(0, 0.05, (20, 3)), np.zeros((20, 3))).as_matrix()
+    )
     up = up_in_base(M_odom_base)
     ours = keyframe_tilts_deg(M_map_base, up)
     e = np.linalg.norm(gravity_residuals(M_map_base, up, 1.0), axis=1)

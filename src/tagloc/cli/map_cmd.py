@@ -144,16 +144,17 @@ def parse_exclusion(text: str) -> Exclusion:
         if kind == "tag":
             tag, _, window = rest.partition("@")
             t0, t1 = _range(window) if window else (None, None)
-            return Exclusion(int(tag), t0, t1, text)
-        if kind == "time":
-            t0, t1 = _range(rest)
-            return Exclusion(None, t0, t1, text)
+            tag_id: int | None = int(tag)
+        elif kind == "time":
+            tag_id, (t0, t1) = None, _range(rest)
+        else:
+            raise ValueError(kind)
     except ValueError:
-        pass
-    raise MappingError(
-        f"--exclude {text!r}: expected tag:ID, tag:ID@T0-T1 or time:T0-T1 (seconds from the "
-        "survey start)"
-    )
+        raise MappingError(
+            f"--exclude {text!r}: expected tag:ID, tag:ID@T0-T1 or time:T0-T1 (seconds from the "
+            "survey start)"
+        ) from None
+    return Exclusion(tag_id, t0, t1, text)
 
 
 def _range(text: str) -> tuple[float, float]:
