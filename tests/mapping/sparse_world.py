@@ -58,8 +58,8 @@ def sparse_world(
         while s - offset < side - 1.0:
             if s - offset > 1.0:  # not in a corner
                 u = s - offset
-                tags.append({"id": len(tags), "size": 0.16, "wall": {
-                    "x": x0 + dx * u, "y": y0 + dy * u, "yaw_deg": yaw, "height": 1.3}})  # fmt: skip
+                wall = {"x": x0 + dx * u, "y": y0 + dy * u, "yaw_deg": yaw, "height": 1.3}
+                tags.append({"id": len(tags), "size": 0.16, "wall": wall})
             s += spacing_m
         offset += side
     h = w / 2

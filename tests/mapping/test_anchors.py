@@ -64,7 +64,7 @@ def test_anchor_sigma_in_tags_yaml() -> None:
         TagMapError, match=r"x.yaml: tags\[0\] \(id 7\): anchor_sigma: only an anchor"
     ):
         TagMap.from_yaml_text(no_anchor, "x.yaml")
-    with pytest.raises(TagMapError, match="anchor_sigma.position_m"):
+    with pytest.raises(TagMapError, match=r"anchor_sigma\.position_m"):
         TagMap.from_yaml_text(text.replace("position_m: 0.003", "position_m: -1"), "x.yaml")
 
 

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from sparse_world import sparse_world
+
 from tagloc.geometry import SE3
 from tagloc.mapping.advice import coverage_gaps, uncertainty_advice
 from tagloc.sim import ObservationConfig, simulate_drive

@@ -16,6 +16,7 @@ of tags is weak there; a far anchor means the whole chain is long. Pure computat
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
@@ -77,7 +78,7 @@ def coverage_gaps(
             frozenset(seen[a]),
             frozenset(seen[b]),
         )
-        for a, b in zip(ks[:-1], ks[1:], strict=True)
+        for a, b in itertools.pairwise(ks)
     ]
 
 
