@@ -10,7 +10,10 @@
 4. corner refinement (:mod:`tagloc.mapping.refine`: Gauss-Newton on the corners, the odometry
    with its calibration and the anchors), then the tilt test of every tag
    (:mod:`tagloc.mapping.flips`) and, if a tag flipped, the refinement again;
-5. marginal covariance of every tag; QA (:mod:`tagloc.mapping.report`) and the TagMap.
+5. marginal covariance of every tag; QA (:mod:`tagloc.mapping.report`, with uncertainty flags and
+   advice: :mod:`tagloc.mapping.map_qa`) and the TagMap; every factor at the solution as records
+   (:mod:`tagloc.mapping.graph_export`). Optional priors: measured anchors with their sigmas
+   (:mod:`tagloc.mapping.anchors`), gravity on every keyframe (:mod:`tagloc.mapping.gravity`).
 
 Pose factors or corner factors? Both, for different jobs. PnP pose factors (one
 ``BetweenFactorPose3`` per observation) converge from drifted odometry and let the IPPE branch be
@@ -41,8 +44,7 @@ from dataclasses import replace
 import numpy as np
 
 from tagloc.geometry import SE3
-from tagloc.mapping.advice import coverage_gaps, uncertainty_advice
-from tagloc.mapping.anchors import Anchor, anchor_default_sigmas, as_anchor
+from tagloc.mapping.anchors import Anchor, as_anchor
 from tagloc.mapping.calibration import (
     OdometryCalibration,
     apply_calibration,
@@ -51,17 +53,14 @@ from tagloc.mapping.calibration import (
     fit_calibration,
 )
 from tagloc.mapping.config import MapBuildConfig
-from tagloc.mapping.exclude import survey_start_ns
 from tagloc.mapping.graph import (
     GraphInput,
     GraphSolution,
     build_graph,
     held_tags,
     marginal_covariances,
-    odometry_sigmas,
     solve_graph,
 )
-from tagloc.mapping.graph_export import GraphAtSolution, factor_records
 from tagloc.mapping.gravity import map_tilt_deg, up_in_base
 from tagloc.mapping.gtsam_bridge import SolverError
 from tagloc.mapping.initialize import (
@@ -70,18 +69,14 @@ from tagloc.mapping.initialize import (
     initialize_tags,
     inverse_h,
 )
+from tagloc.mapping.map_qa import graph_records, map_and_report
 from tagloc.mapping.observations import Observations, collect_observations
 from tagloc.mapping.refine import Priors, State, refine_and_test_tilts
 from tagloc.mapping.report import (
     BuildReport,
-    TagQA,
-    corner_residuals_px,
-    reprojection_residuals,
-    rms,
-    tag_sigmas,
 )
 from tagloc.mapping.survey import MappingError, Survey, TagKey
-from tagloc.tags.tagmap import DEFAULT_FAMILY, TagEntry, TagMap
+from tagloc.tags.tagmap import DEFAULT_FAMILY, TagMap
 
 logger = logging.getLogger(__name__)
 
@@ -260,22 +255,12 @@ def build_tag_map(
         raise exc.naming(tag_names) from None
     # 5. QA and the map
     t = time.perf_counter()
-    tag_map, report = _map_and_report(
+    tag_map, report = map_and_report(
         survey, obs, solution, set(M_anchor), M_map_base_odometry, config, set(ambiguous)
     )
     object.__setattr__(report, "tilt_deg", map_tilt_deg(solution.M_map_base, up_base))
-    at_solution = GraphAtSolution(
-        survey.source, survey_start_ns(survey), obs.keyframe_stamps_ns, solution.M_map_base,
-        solution.M_map_tag, obs.tag_keys, obs.keyframe, obs.tag, obs.camera,
-        corner_residuals_px(
-            obs, solution.M_map_base, solution.M_map_tag, survey.cameras, survey.T_base_cam
-        ),
-        solution.mahalanobis, config.outlier_sigma, inverse_h(M_odom_raw[:-1]) @ M_odom_raw[1:],
-        state.c, odometry_sigmas(M_odom_raw, config.odometry), held,
-        {j: priors.anchor_sigmas.get(j, anchor_default_sigmas(config)) for j in held},
-        priors.up_base, float(np.radians(config.gravity.sigma_deg)),
-    )  # fmt: skip
-    object.__setattr__(report, "factors", tuple(factor_records(at_solution)))
+    factors = graph_records(survey, obs, solution, M_odom_raw, state.c, held, priors, config)
+    object.__setattr__(report, "factors", factors)
     timings["report"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t_start
     object.__setattr__(report, "timings_s", timings)
@@ -288,102 +273,3 @@ def _odometry_in_map(obs: Observations, M_map_base_init: np.ndarray) -> np.ndarr
     """Keyframe odometry, aligned to ``map`` at the first keyframe (the 'before' trajectory)."""
     M_odom_base = obs.T_odom_base.as_matrix().reshape(-1, 4, 4)
     return np.asarray((M_map_base_init[0] @ inverse_h(M_odom_base[0])) @ M_odom_base)
-
-
-def _map_and_report(
-    survey: Survey,
-    obs: Observations,
-    solution: GraphSolution,
-    anchor_indices: set[int],
-    M_map_base_odometry: np.ndarray,
-    config: MapBuildConfig,
-    ambiguous: set[int],
-) -> tuple[TagMap, BuildReport]:
-    residual = reprojection_residuals(
-        obs, solution.M_map_base, solution.M_map_tag, survey.cameras, survey.T_base_cam
-    )
-    outlier = solution.mahalanobis > config.outlier_sigma
-    cams = np.array(obs.camera)
-    entries, qa = [], []
-    sigma_m, sigma_deg = tag_sigmas(solution.cov_map_tag)
-    flagged = sorted(j for j, s in sigma_m.items() if s > config.uncertainty_flag_m)
-    advice = uncertainty_advice(
-        flagged,
-        coverage_gaps(
-            solution.M_map_base[:, :3, 3],
-            obs.keyframe_stamps_ns,
-            obs.keyframe,
-            obs.tag,
-            survey_start_ns(survey),
-        ),
-        {j: M[:3, 3] for j, M in solution.M_map_tag.items()},
-        sorted(anchor_indices),
-        [str(key[1]) for key in obs.tag_keys],
-    )
-    for j in sorted(solution.M_map_tag):
-        family, tag_id = obs.tag_keys[j]
-        idx = np.flatnonzero(obs.tag == j)
-        n_out = int(outlier[idx].sum())
-        disagreeing = n_out >= 3 and n_out > config.disagreeing_fraction * len(idx)
-        cov = solution.cov_map_tag.get(j)
-        sigma = sigma_m.get(j, float("nan"))
-        T_map_tag = SE3.from_matrix(solution.M_map_tag[j], normalize=True)
-        note = (
-            f"built from {len(idx)} observations"
-            + (f"; sigma {100 * sigma:.1f} cm, {sigma_deg[j]:.2f} deg" if j in sigma_m else "")
-            + (f"; {n_out} disagree (moved or duplicated?)" if disagreeing else "")
-            + ("; tilt ambiguous (seen only face-on or far)" if j in ambiguous else "")
-            + ("; uncertain" if j in advice else "")
-        )
-        entries.append(
-            TagEntry.from_pose(
-                tag_id,
-                T_map_tag,
-                float(obs.tag_sizes[j]),
-                family=family,
-                anchor=j in anchor_indices,
-                observations=len(idx),
-                covariance=cov,
-                note=note,
-            )
-        )
-        qa.append(
-            TagQA(
-                family,
-                tag_id,
-                len(idx),
-                n_out,
-                rms(residual[idx[~outlier[idx]]]),
-                sigma,
-                tuple(sorted(set(cams[idx].tolist()))),
-                j in anchor_indices,
-                disagreeing,
-                j in ambiguous,
-                sigma_deg.get(j, float("nan")),
-                j in advice,
-                advice.get(j, ""),
-            )
-        )
-    inlier = ~outlier
-    report = BuildReport(
-        source=survey.source,
-        tags=tuple(qa),
-        reproj_rms_px=rms(residual[inlier]),
-        reproj_rms_px_per_camera={
-            str(c): rms(residual[inlier & (cams == c)]) for c in sorted(set(obs.camera))
-        },
-        observations=len(obs),
-        outliers=int(outlier.sum()),
-        keyframes=len(obs.keyframe_stamps_ns),
-        dropped=dict(obs.dropped),
-        disagreeing_tags=tuple(t.tag_id for t in qa if t.disagreeing),
-        keyframe_stamps_ns=obs.keyframe_stamps_ns,
-        T_map_base_odometry=SE3.from_matrix(M_map_base_odometry, normalize=True),
-        T_map_base_optimized=SE3.from_matrix(solution.M_map_base, normalize=True),
-        iterations=solution.iterations,
-        error_initial=solution.error_initial,
-        error_final=solution.error_final,
-        gravity_priors=config.gravity.aligned_odometry,
-        uncertainty_flag_m=config.uncertainty_flag_m,
-    )
-    return TagMap.from_entries(entries), report
