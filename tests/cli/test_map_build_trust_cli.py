@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from cli_runner import run_tagloc
@@ -28,12 +29,12 @@ def _short_world(tmp_path: Path) -> Path:
 def test_export_graph_exclude_and_flags(tmp_path: Path) -> None:
     out, graph, report = tmp_path / "tags.yaml", tmp_path / "graph.jsonl", tmp_path / "qa.json"
     config = tmp_path / "build.yaml"
-    config.write_text("gravity: {aligned_odometry: true, sigma_deg: 0.5}\n")
+    config.write_text("gravity: {sigma_deg: 0.5}\n")  # the flag below turns them on
     result = run_tagloc(
         "map", "build", "--sim", "--world", str(_short_world(tmp_path)), "--camera-stride", "6",
         "--out", str(out), "--export-graph", str(graph), "--report", str(report),
         "--exclude", "tag:13", "--exclude", "time:0-1", "--uncertain-cm", "2",
-        "--config", str(config),
+        "--config", str(config), "--gravity-aligned-odometry", "--anchor-sigma", "0.001,0.5",
     )  # fmt: skip
     assert result.returncode == 0, result.stderr
     records = [json.loads(line) for line in graph.read_text().splitlines()]
@@ -42,6 +43,14 @@ def test_export_graph_exclude_and_flags(tmp_path: Path) -> None:
     assert kinds == {"observation", "odometry", "anchor", "gravity"}
     obs = [r for r in records if r["type"] == "observation"]
     assert all(r["tag"] != 13 and r["t_s"] > 1.0 for r in obs)
+    (anchor,) = [r for r in records if r["type"] == "anchor"]
+    np.testing.assert_allclose(anchor["sigma"], [0.001] * 3 + [np.radians(0.5)] * 3, rtol=1e-6)
+    gravity = [r for r in records if r["type"] == "gravity"]
+    assert all(
+        r["whitened"]
+        == pytest.approx(np.radians(r["tilt_deg"]) / np.radians(0.5), rel=1e-2, abs=1e-3)
+        for r in gravity
+    )
     assert load_tag_map(out).get(13) is None
     qa = json.loads(report.read_text())
     assert qa["gravity_priors"] is True and qa["uncertainty_flag_m"] == 0.02
