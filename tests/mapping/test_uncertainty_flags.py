@@ -48,7 +48,7 @@ def test_sparse_building_flags_the_tags_that_are_off() -> None:
     errors, flagged, advice = _flags(seed=2)
     assert errors.max() > 0.5  # the sparse building really is hard
     _check(errors, flagged)
-    assert all("add a tag between" in a or "add an anchor near" in a for a in advice)
+    assert all("add a tag between" in a or "add an anchor" in a for a in advice)
     assert any("add a tag between" in a for a in advice)
 
 
@@ -103,4 +103,14 @@ def test_map_diff_tells_moves_beyond_the_combined_uncertainty() -> None:
     (move,) = diff_tag_maps(bare, beyond).moved
     assert (
         move.sigmas is None and "sigma" not in format_tag_map_diff(diff_tag_maps(bare, beyond))[0]
+    )
+
+
+def test_a_tag_next_to_an_anchor_is_told_to_look_at_the_anchor() -> None:
+    advice = uncertainty_advice(
+        [1], [], {0: np.zeros(3), 1: np.array([2.0, 0.0, 0.0])}, [0], ["6", "88"]
+    )
+    assert advice[1] == (
+        "add an anchor far from anchor 6 (2.0 m from tag 88: that anchor's own sigma sets this "
+        "tag's; measure it better)"
     )

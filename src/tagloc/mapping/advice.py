@@ -8,7 +8,9 @@ at the survey path around it:
   consecutive keyframes with any tag sighting) that starts right after a sighting of the tag or
   ends at one; the tags sighted at its other end name where a new tag belongs ("add a tag between
   X and Y");
-- the distance to the nearest anchor ("add an anchor near tag X").
+- the distance to the nearest anchor ("add an anchor near tag X"; a tag within
+  :data:`NEAR_ANCHOR_M` of an anchor is uncertain because of that anchor's own sigma: "add an
+  anchor far from anchor A", or measure A better).
 
 Both are given (a gap only when it is at least :data:`MIN_GAP_M` long): a gap means the chain
 of tags is weak there; a far anchor means the whole chain is long. Pure computation on arrays.
@@ -26,6 +28,9 @@ import numpy.typing as npt
 FloatArray = npt.NDArray[np.float64]
 #: Shorter stretches without a sighting are not worth a tag (m of path).
 MIN_GAP_M = 2.0
+#: A flagged tag closer than this to an anchor is uncertain because of the anchor's own sigma
+#: (its orientation, levered over the distance): the advice is another anchor far away.
+NEAR_ANCHOR_M = 5.0
 IntArray = npt.NDArray[np.int64]
 
 
@@ -120,10 +125,16 @@ def uncertainty_advice(
                 anchors, key=lambda a: float(np.linalg.norm(tag_positions[a] - tag_positions[j]))
             )
             dist = float(np.linalg.norm(tag_positions[nearest] - tag_positions[j]))
-            parts.append(
-                f"or add an anchor near tag {names[j]} "
-                f"(nearest anchor {names[nearest]} is {dist:.1f} m away)"
-            )
+            if dist < NEAR_ANCHOR_M:
+                parts.append(
+                    f"or add an anchor far from anchor {names[nearest]} ({dist:.1f} m from tag "
+                    f"{names[j]}: that anchor's own sigma sets this tag's; measure it better)"
+                )
+            else:
+                parts.append(
+                    f"or add an anchor near tag {names[j]} "
+                    f"(nearest anchor {names[nearest]} is {dist:.1f} m away)"
+                )
         else:
             parts.append(f"or add an anchor near tag {names[j]}")
         text = "; ".join(parts)
