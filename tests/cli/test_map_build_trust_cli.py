@@ -99,7 +99,7 @@ def test_dupont_with_measured_anchor_file_and_gravity(tmp_path: Path) -> None:
     anchors.write_text(
         "version: 1\ntags:\n  - {id: 6, size: 0.15, position: [1.92018, 0.5987, 2.2390], "
         "quat_xyzw: [0, -0.7071067812, 0, 0.7071067812], anchor: true, "
-        "anchor_sigma: {position_m: 0.0001, rotation_deg: 2}}\n"
+        "anchor_sigma: {position_m: 0.0001, rotation_deg: 0.5}}\n"
     )
     result = run_tagloc(
         "map", "build", "--bag", str(DUPONT / "tag_detections.bag.bz2"),
