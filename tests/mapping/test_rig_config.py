@@ -36,10 +36,8 @@ def test_remaps_are_parsed_in_nanoseconds() -> None:
     [
         ("tag_id_remap: {id: 20}", "tag_id_remap: expected a list"),
         ("tag_id_remap: [{id: 20}]", r"tag_id_remap\[0\]: expected id and remaps"),
-        (
-            "tag_id_remap: [{id: 20, remaps: [{remap_id: 4, start_time: 2, end_time: 1}]}]",
-            "end_time before start_time",
-        ),
+        ("tag_id_remap: [{id: 20, remaps: [{remap_id: 4, start_time: 2, end_time: 1}]}]",
+         "end_time before start_time"),
     ],
 )
 def test_bad_remaps_name_the_entry(text: str, words: str) -> None:

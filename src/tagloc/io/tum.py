@@ -83,11 +83,9 @@ def write_tum(path: str | os.PathLike[str], stamps_ns: npt.ArrayLike, T_map_base
 def tum_line(stamp_ns: int, values: list[float]) -> str:
     """One TUM line: the stamp with 9 decimals, then ``tx ty tz qx qy qz qw`` (``values``) in
     the shortest repr that reads back exactly."""
-    return (
-        f"{stamp_ns // 1_000_000_000}.{stamp_ns % 1_000_000_000:09d} "
-        + " ".join(map(repr, values))
-        + "\n"
-    )
+    return f"{stamp_ns // 1_000_000_000}.{stamp_ns % 1_000_000_000:09d} " + " ".join(
+        map(repr, values)
+    ) + "\n"
 
 
 def read_tum(path: str | os.PathLike[str], *, quat_tol: float = 1e-3) -> tuple[Int64Array, SE3]:

@@ -834,7 +834,9 @@ class MapOdomFilter:
             return nu, H
         return nu, np.hstack([H_f @ E.inverse().adjoint(), H_f @ Jr_u @ M])
 
-    def _iekf(self, cand: Candidate, innov: _Innovation) -> tuple[Pose, FloatArray, FloatArray]:
+    def _iekf(
+        self, cand: Candidate, innov: _Innovation
+    ) -> tuple[Pose, FloatArray, FloatArray]:
         """Iterated error-state update (module docstring) of the pose and the calibration;
         returns the new ``X``, ``c`` and ``P``. Relinearizes while the step seen at the base,
         ``|H dx|``, exceeds the tolerance."""

@@ -112,8 +112,12 @@ class Ladder:
             hard = self._last_hard
             if not (hard or dwelt):
                 return None
-            skipped = [f"{Level(v).label}: {', '.join(unmet[Level(v)])}" for v in range(1, target)]
-            reason = f"{target.label} available" + (f" ({'; '.join(skipped)})" if skipped else "")
+            skipped = [
+                f"{Level(v).label}: {', '.join(unmet[Level(v)])}" for v in range(1, target)
+            ]
+            reason = f"{target.label} available" + (
+                f" ({'; '.join(skipped)})" if skipped else ""
+            )
         move = LadderTransition(stamp_ns, self.level, target, reason, hard)
         self.level, self._since_ns, self._last_hard = target, stamp_ns, hard
         self.transitions += 1
