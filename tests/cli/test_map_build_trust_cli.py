@@ -1,6 +1,7 @@
 """``tagloc map build`` options for a map you can trust: --export-graph, --exclude,
 --anchor-sigma, --anchors with anchor_sigma, --gravity-aligned-odometry, --config,
---uncertain-cm; bad values give one line, exit 1 and no output."""
+--uncertain-cm, and `map diff` against the maps' uncertainty; bad values give one line, exit 1
+and no output."""
 
 from __future__ import annotations
 
@@ -113,3 +114,34 @@ def test_dupont_with_measured_anchor_file_and_gravity(tmp_path: Path) -> None:
     line = next(x for x in result.stdout.splitlines() if "map tilt" in x)
     assert float(line.split("gravity ")[1].split(" deg")[0]) <= 0.2
     assert len(load_tag_map(out)) == 20
+
+
+def test_map_diff_tells_moves_beyond_and_within_uncertainty(tmp_path: Path) -> None:
+    cov = (
+        "covariance: ["
+        + ", ".join(
+            str(0.0025 if i == j and i < 3 else (1e-4 if i == j else 0.0))
+            for i in range(6)
+            for j in range(6)
+        )
+        + "]"
+    )
+    entry = "  - {{id: {id}, size: 0.16, position: [{x}, 0, 1], quat_xyzw: [0, 0, 0, 1], {cov}}}\n"
+    old, new = tmp_path / "old.yaml", tmp_path / "new.yaml"
+    old.write_text(
+        "version: 1\ntags:\n" + entry.format(id=1, x=0, cov=cov) + entry.format(id=2, x=5, cov=cov)
+    )
+    new.write_text(
+        "version: 1\ntags:\n"
+        + entry.format(id=1, x=0.1, cov=cov)
+        + entry.format(id=2, x=5.5, cov=cov)
+    )
+    result = run_tagloc("map", "diff", str(old), str(new))
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert (
+        "tag36h11:1 moved 10.0 cm" in lines[0] and "1.4 sigma: within their uncertainty" in lines[0]
+    )
+    assert (
+        "tag36h11:2 moved 50.0 cm" in lines[1] and "7.1 sigma: beyond their uncertainty" in lines[1]
+    )
