@@ -37,7 +37,8 @@ EXAMPLE = """\
 # quat_xyzw: [x, y, z, w] (ROS/scipy order), unit norm within 1e-6, written with w >= 0.
 # covariance (optional): 6x6 rows of the right perturbation T_frame_tag (+) [x, y, z, rx,
 #   ry, rz] (metres, radians; translation first, as ROS PoseWithCovariance).
-# anchor: true = surveyed pose, kept fixed by the map builder. observations: builder count.
+# anchor: true = surveyed pose, a prior of the map builder; anchor_sigma: its standard
+#   deviation per axis {position_m, rotation_deg}. observations: builder count.
 # Tags are sorted by (family, id). Saving rewrites the file: comments are lost; use note.
 version: 1
 frames: [map, elevator_cab]
@@ -58,6 +59,7 @@ tags:
     position: [0.000000, 2.350000, 1.400000]
     quat_xyzw: [0.500000000, 0.500000000, 0.500000000, 0.500000000]
     anchor: true
+    anchor_sigma: {position_m: 0.005, rotation_deg: 1}
     note: "lobby, left of the main door (surveyed)"
 
   - id: 3

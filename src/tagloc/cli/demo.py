@@ -172,6 +172,7 @@ def run_demo(
         title=f"{world.name}: {drive.length_m:.0f} m, {world.robot.odometry.model} odometry "
         f"(seed {scenario.drive.seed}) drifts {drive.endpoint_drift_m:.2f} m; fused ATE "
         f"{ate:.3f} m",
+        tag_map=None if survey is None else survey.tag_map,
     )  # fmt: skip
     files.append(out / "drive.png")
     console.print(_table(drive, survey, summaries, main))

@@ -10,6 +10,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -19,7 +20,10 @@ from tagloc.cli.options import OptionError, in_range, positive_int, seed_range
 
 if TYPE_CHECKING:
     from tagloc.geometry import SE3
-    from tagloc.mapping import Survey
+    from tagloc.mapping import MapBuildConfig, Survey
+    from tagloc.mapping.anchors import Anchor
+    from tagloc.mapping.exclude import Exclusion
+    from tagloc.tags.tagmap import TagMap
 
 map_app = typer.Typer(
     help="Tag maps (tags.yaml): build one from a survey, check one, compare two.",
@@ -115,6 +119,78 @@ def _tag_sizes(values: list[str]) -> dict[int, float]:
     return sizes
 
 
+def _anchor_sigma(value: str | None) -> dict[str, float]:
+    """``--anchor-sigma POS_M,ROT_DEG`` as the builder's default anchor sigmas."""
+    from tagloc.mapping import MappingError
+
+    if value is None:
+        return {}
+    try:
+        pos, rot = (float(v) for v in value.split(","))
+    except ValueError:
+        raise MappingError(f"--anchor-sigma {value!r}: expected POS_M,ROT_DEG") from None
+    if not (0.0 < pos <= 10.0 and 0.0 < rot <= 90.0):
+        raise OptionError(f"--anchor-sigma {value!r}: expected 0 < POS_M <= 10, 0 < ROT_DEG <= 90")
+    return {"anchor_sigma_m": pos, "anchor_sigma_rad": math.radians(rot)}
+
+
+def parse_exclusion(text: str) -> Exclusion:
+    """``tag:ID``, ``tag:ID@T0-T1`` or ``time:T0-T1`` (seconds from the survey start)."""
+    from tagloc.mapping import MappingError
+    from tagloc.mapping.exclude import Exclusion
+
+    kind, _, rest = text.partition(":")
+    try:
+        if kind == "tag":
+            tag, _, window = rest.partition("@")
+            t0, t1 = _range(window) if window else (None, None)
+            tag_id: int | None = int(tag)
+        elif kind == "time":
+            tag_id, (t0, t1) = None, _range(rest)
+        else:
+            raise ValueError(kind)
+    except ValueError:
+        raise MappingError(
+            f"--exclude {text!r}: expected tag:ID, tag:ID@T0-T1 or time:T0-T1 (seconds from the "
+            "survey start)"
+        ) from None
+    return Exclusion(tag_id, t0, t1, text)
+
+
+def _range(text: str) -> tuple[float, float]:
+    t0, sep, t1 = text.partition("-")
+    if not sep:
+        raise ValueError(text)
+    a, b = float(t0), float(t1)
+    if not (math.isfinite(a) and math.isfinite(b)):
+        raise ValueError(text)
+    return a, b
+
+
+def _build_config(
+    path: Path | None, base: MapBuildConfig, update: dict[str, object]
+) -> MapBuildConfig:
+    """``base`` updated by the ``--config`` YAML (MapBuildConfig fields), then by options."""
+    from tagloc.config import parse_yaml_mapping, validate
+    from tagloc.mapping import MapBuildConfig
+
+    data = base.model_dump()
+    if path is not None:
+        data = _merged(data, parse_yaml_mapping(_read_text(path, "build configuration"), str(path)))
+    data = _merged(data, update)
+    return validate(MapBuildConfig, data, str(path) if path is not None else "options")
+
+
+def _merged(base: dict[str, object], update: dict[str, object]) -> dict[str, object]:
+    out = dict(base)
+    for key, value in update.items():
+        old = out.get(key)
+        out[key] = (
+            _merged(old, value) if isinstance(old, dict) and isinstance(value, dict) else value
+        )
+    return out
+
+
 def _tag_topics(cameras_yaml: Path, given: list[str]) -> dict[str, str]:
     """``topic -> camera`` from ``--tag-topic CAM=TOPIC`` or the camchain's ``tagtopic`` keys."""
     from tagloc.config import parse_yaml_mapping
@@ -139,7 +215,7 @@ def _bag_survey(
     corner_order: str,
     tag_size: float | None,
     sizes: dict[int, float],
-) -> tuple[Survey, dict[int, SE3]]:
+) -> tuple[Survey, dict[int, SE3 | Anchor]]:
     from tagloc.geometry import SE3
     from tagloc.io import BagSource, load_kalibr_cameras
     from tagloc.mapping import MappingError
@@ -178,6 +254,21 @@ def _bag_survey(
         source=str(bag),
     )
     return survey, dict(rig.anchors) if rig else {}
+
+
+def _measured_anchors(tag_map: TagMap) -> dict[int, SE3 | Anchor]:
+    """The entries of an anchors file, with their ``anchor_sigma`` where they give one."""
+    from tagloc.mapping.anchors import Anchor
+
+    out: dict[int, SE3 | Anchor] = {}
+    for e in tag_map:
+        sigma = e.anchor_sigma
+        out[e.id] = (
+            e.T_frame_tag()
+            if sigma is None
+            else Anchor(e.T_frame_tag(), sigma.position_m, sigma.rotation_deg)
+        )
+    return out
 
 
 @map_app.command("build")
@@ -226,12 +317,47 @@ def map_build(
             callback=in_range(ge=0, le=MAX_CALIBRATION_ROUNDS),
         ),
     ] = None,
+    config_file: Annotated[
+        Path | None,
+        typer.Option("--config", help="Map build configuration YAML (MapBuildConfig fields)."),
+    ] = None,
+    gravity: Annotated[
+        bool | None,
+        typer.Option(
+            "--gravity-aligned-odometry/--no-gravity",
+            help="The odometry's z is gravity (VIO): roll and pitch priors on every keyframe.",
+        ),
+    ] = None,
+    anchor_sigma: Annotated[
+        str | None,
+        typer.Option(
+            help="POS_M,ROT_DEG: sigma of anchors that give none (tags.yaml anchor_sigma)."
+        ),
+    ] = None,
+    uncertain_cm: Annotated[
+        float | None,
+        typer.Option(
+            help="Flag tags whose position sigma exceeds this (default 5).",
+            callback=in_range(gt=0, le=1000),
+        ),
+    ] = None,
+    export_graph: Annotated[
+        Path | None,
+        typer.Option(help="Write every factor and its residual at the solution (JSON lines)."),
+    ] = None,
+    exclude: Annotated[
+        list[str],
+        typer.Option(
+            help="Leave out tag:ID, tag:ID@T0-T1 or time:T0-T1 (s from the survey start; repeat)."
+        ),
+    ] = [],  # noqa: B006
 ) -> None:
     """Build a tag map from a survey drive (a bag, or --sim) and print its QA report."""
     from rich.progress import Progress
 
     from tagloc.fileutil import atomic_write_texts, check_outputs
     from tagloc.mapping import MapBuildConfig, MappingError, build_tag_map
+    from tagloc.mapping.exclude import exclude_observations
     from tagloc.sim.survey import build_map_from_drive, sim_build_config
     from tagloc.tags.tagmap import load_tag_map
 
@@ -240,15 +366,21 @@ def map_build(
     if sim and anchors is not None:
         raise MappingError("--anchors is for --bag (with --sim, give --anchor ID: true poses)")
     check_outputs(
-        {"--out": out, "--report": report},
+        {"--out": out, "--report": report, "--export-graph": export_graph},
         inputs={"--bag": bag, "--world": world, "--cameras": cameras,
-                "--camera-poses": camera_poses, "--tagslam": tagslam, "--anchors": anchors},
+                "--camera-poses": camera_poses, "--tagslam": tagslam, "--anchors": anchors,
+                "--config": config_file},
     )  # fmt: skip
     sizes = _tag_sizes(size)
-    known_anchors = (
-        {} if anchors is None else {e.id: e.T_frame_tag() for e in load_tag_map(anchors)}
-    )
-    rounds = {} if calibrate_odometry is None else {"calibration_rounds": calibrate_odometry}
+    exclusions = [parse_exclusion(text) for text in exclude]
+    known_anchors = {} if anchors is None else _measured_anchors(load_tag_map(anchors))
+    rounds: dict[str, object] = dict(_anchor_sigma(anchor_sigma))
+    if calibrate_odometry is not None:
+        rounds["calibration_rounds"] = calibrate_odometry
+    if gravity is not None:
+        rounds["gravity"] = {"aligned_odometry": gravity}
+    if uncertain_cm is not None:
+        rounds["uncertainty_flag_m"] = uncertain_cm / 100.0
     with Progress(transient=True) as bar:
         task = bar.add_task("mapping", total=1.0)
 
@@ -261,7 +393,7 @@ def map_build(
             sim_world = load_world(world) if world is not None else load_default_world()
             drive = simulate_drive(sim_world, seed=seed)
             observation_config = ObservationConfig(seed=seed)
-            config = sim_build_config(drive, observation_config).model_copy(update=rounds)
+            config = _build_config(config_file, sim_build_config(drive, observation_config), rounds)
             tag_map, qa = build_map_from_drive(
                 drive,
                 observation_config,
@@ -269,6 +401,7 @@ def map_build(
                 config=config,
                 camera_stride=camera_stride,
                 progress=progress,
+                exclusions=exclusions,
             )
         else:
             from tagloc.geometry import SE3
@@ -296,11 +429,14 @@ def map_build(
                 )
             # one anchor without a known pose defines the map frame (identity pose)
             T_map_anchor = {i: known.get(i, SE3.identity()) for i in chosen}
-            config = MapBuildConfig(**rounds)
+            config = _build_config(config_file, MapBuildConfig(), rounds)
+            survey = exclude_observations(survey, exclusions)
             tag_map, qa = build_tag_map(survey, T_map_anchor, config, progress)
     files = {out: tag_map.to_yaml_text()}
     if report is not None:
         files[report] = qa.to_json() if report.suffix == ".json" else qa.to_markdown()
+    if export_graph is not None:
+        files[export_graph] = qa.graph_jsonl()
     atomic_write_texts(files)  # both or neither
     typer.echo("\n".join(qa.summary_lines()))
     typer.echo(f"wrote {out} ({tag_map.summary()})")

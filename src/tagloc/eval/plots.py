@@ -5,10 +5,14 @@ from __future__ import annotations
 import os
 
 import numpy as np
+import numpy.typing as npt
 
 from tagloc.fileutil import atomic_path
 from tagloc.geometry import SE3
 from tagloc.sim import World
+from tagloc.tags.tagmap import TagMap
+
+FloatArray = npt.NDArray[np.float64]
 
 _MATERIAL_STYLE = {
     "wall": {"color": "0.15", "linewidth": 2.0, "linestyle": "-"},
@@ -23,6 +27,7 @@ def plot_world_and_paths(
     path: str | os.PathLike[str],
     *,
     title: str = "",
+    tag_map: TagMap | None = None,
 ) -> None:
     """Top-down plot of walls (by material), tags (face normal arrows, ids) and base paths.
 
@@ -35,6 +40,10 @@ def plot_world_and_paths(
         "odometry": T_odom_base}``), in order; the first is drawn solid, the rest dashed.
     path : path-like
         Output image (PNG); written atomically.
+    title : str
+    tag_map : TagMap, optional
+        A built map: its ``map``-frame tags drawn beside the true ones (a line from the truth),
+        with the 2-sigma ellipse of each tag's horizontal position where it has a covariance.
     """
     import matplotlib
 
@@ -73,6 +82,8 @@ def plot_world_and_paths(
             va="center",
             color="tab:orange",
         )
+    if tag_map is not None:
+        _draw_built_tags(ax, tag_map, world)
     # 3. paths
     colors = ["tab:green", "tab:red", "tab:blue", "tab:gray"]
     for i, (name, T_map_base) in enumerate(paths.items()):
@@ -97,3 +108,36 @@ def plot_world_and_paths(
     with atomic_path(path) as tmp:
         fig.savefig(tmp)
     plt.close(fig)
+
+
+def ellipse_2sigma(cov_xy: FloatArray) -> tuple[float, float, float]:
+    """``(width, height, angle_deg)`` of the 2-sigma ellipse of a ``(2, 2)`` covariance: full
+    axes (m), the first along the larger eigenvector, at ``angle_deg`` from x."""
+    values, vectors = np.linalg.eigh(np.asarray(cov_xy, dtype=np.float64))
+    major = vectors[:, 1]
+    width, height = 4.0 * np.sqrt(np.maximum(values[::-1], 0.0))
+    return float(width), float(height), float(np.degrees(np.arctan2(major[1], major[0])))
+
+
+def _draw_built_tags(ax: object, tag_map: TagMap, world: World) -> None:
+    """Built tags (blue crosses), a line from each true tag, 2-sigma ellipses."""
+    from matplotlib.patches import Ellipse
+
+    truth = {(t.family, t.id): world.T_map_tag(t) for t in world.tags}
+    first = True
+    for entry in tag_map.in_frame("map"):
+        T = entry.T_frame_tag()
+        p = np.asarray(T.translation)
+        label = "built map (2-sigma)" if first else None
+        ax.plot(p[0], p[1], "+", color="tab:blue", markersize=7, label=label)  # type: ignore[attr-defined]
+        first = False
+        if entry.key in truth:
+            q = np.asarray(truth[entry.key].translation)
+            ax.plot([q[0], p[0]], [q[1], p[1]], color="tab:blue", linewidth=0.8)  # type: ignore[attr-defined]
+        cov = entry.covariance_matrix()
+        if cov is not None:
+            R = np.asarray(T.rotation.as_matrix())
+            width, height, angle = ellipse_2sigma((R @ cov[:3, :3] @ R.T)[:2, :2])
+            ax.add_patch(  # type: ignore[attr-defined]
+                Ellipse((p[0], p[1]), width, height, angle=angle, fill=False, color="tab:blue")
+            )

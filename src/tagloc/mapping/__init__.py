@@ -5,13 +5,17 @@
   (:func:`survey_from_messages`; :func:`survey_from_tagslam` with a tagSLAM rig's settings).
 - :func:`build_tag_map` -> ``(TagMap, BuildReport)``; :mod:`tagloc.sim.survey` builds one
   from a simulated drive and measures it against the simulated world.
-- :class:`MapBuildConfig`: the tunables.
+- :class:`MapBuildConfig`: the tunables (:class:`GravityConfig`: roll and pitch priors from a
+  gravity-aligned odometry); :class:`Anchor`: a measured anchor with its sigmas;
+  :func:`exclude_observations`: leave detections out before building again.
 
 Errors are :class:`MappingError`.
 """
 
+from tagloc.mapping.anchors import Anchor
 from tagloc.mapping.builder import build_tag_map
-from tagloc.mapping.config import MapBuildConfig, OdometryNoise
+from tagloc.mapping.config import GravityConfig, MapBuildConfig, OdometryNoise
+from tagloc.mapping.exclude import Exclusion, exclude_observations
 from tagloc.mapping.report import BuildReport, TagQA
 from tagloc.mapping.stream_survey import (
     RigConfig,
@@ -24,8 +28,11 @@ from tagloc.mapping.stream_survey import (
 from tagloc.mapping.survey import CameraFrame, MappingError, Survey, only_cameras
 
 __all__ = [
+    "Anchor",
     "BuildReport",
     "CameraFrame",
+    "Exclusion",
+    "GravityConfig",
     "MapBuildConfig",
     "MappingError",
     "OdometryNoise",
@@ -34,6 +41,7 @@ __all__ = [
     "TagQA",
     "build_tag_map",
     "corner_rotation_by_gravity",
+    "exclude_observations",
     "only_cameras",
     "parse_camera_poses",
     "parse_tagslam",

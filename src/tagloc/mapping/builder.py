@@ -10,7 +10,10 @@
 4. corner refinement (:mod:`tagloc.mapping.refine`: Gauss-Newton on the corners, the odometry
    with its calibration and the anchors), then the tilt test of every tag
    (:mod:`tagloc.mapping.flips`) and, if a tag flipped, the refinement again;
-5. marginal covariance of every tag; QA (:mod:`tagloc.mapping.report`) and the TagMap.
+5. marginal covariance of every tag; QA (:mod:`tagloc.mapping.report`, with uncertainty flags and
+   advice: :mod:`tagloc.mapping.map_qa`) and the TagMap; every factor at the solution as records
+   (:mod:`tagloc.mapping.graph_export`). Optional priors: measured anchors with their sigmas
+   (:mod:`tagloc.mapping.anchors`), gravity on every keyframe (:mod:`tagloc.mapping.gravity`).
 
 Pose factors or corner factors? Both, for different jobs. PnP pose factors (one
 ``BetweenFactorPose3`` per observation) converge from drifted odometry and let the IPPE branch be
@@ -41,6 +44,7 @@ from dataclasses import replace
 import numpy as np
 
 from tagloc.geometry import SE3
+from tagloc.mapping.anchors import Anchor, as_anchor
 from tagloc.mapping.calibration import (
     OdometryCalibration,
     apply_calibration,
@@ -57,6 +61,7 @@ from tagloc.mapping.graph import (
     marginal_covariances,
     solve_graph,
 )
+from tagloc.mapping.gravity import map_tilt_deg, up_in_base
 from tagloc.mapping.gtsam_bridge import SolverError
 from tagloc.mapping.initialize import (
     choose_branches,
@@ -64,31 +69,39 @@ from tagloc.mapping.initialize import (
     initialize_tags,
     inverse_h,
 )
+from tagloc.mapping.map_qa import graph_records, map_and_report
 from tagloc.mapping.observations import Observations, collect_observations
-from tagloc.mapping.refine import State, refine_and_test_tilts
-from tagloc.mapping.report import BuildReport, TagQA, reprojection_residuals, rms
+from tagloc.mapping.refine import Priors, State, refine_and_test_tilts
+from tagloc.mapping.report import (
+    BuildReport,
+)
 from tagloc.mapping.survey import MappingError, Survey, TagKey
-from tagloc.tags.tagmap import DEFAULT_FAMILY, TagEntry, TagMap
+from tagloc.tags.tagmap import DEFAULT_FAMILY, TagMap
 
 logger = logging.getLogger(__name__)
 
 #: ``progress(stage, done, total)``; stages ``"pnp"``, ``"optimize"``.
 ProgressFn = Callable[[str, int, int], None]
-Anchors = Mapping[int, SE3] | Mapping[TagKey, SE3]
+Anchors = Mapping[int, SE3 | Anchor] | Mapping[TagKey, SE3 | Anchor]
 
 
-def _anchor_indices(anchors: Anchors, obs: Observations, source: str) -> dict[int, np.ndarray]:
+def _anchor_indices(
+    anchors: Anchors, obs: Observations, source: str, config: MapBuildConfig
+) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray]]:
+    """Anchor poses and prior sigmas by tag index."""
     index = {key: j for j, key in enumerate(obs.tag_keys)}
-    result = {}
-    for key, T_map_tag in anchors.items():
+    result, sigmas = {}, {}
+    for key, value in anchors.items():
+        anchor = as_anchor(value)
         tag_key = key if isinstance(key, tuple) else (DEFAULT_FAMILY, int(key))
         if tag_key not in index:
             raise MappingError(
                 f"{source}: anchor tag {tag_key[0]}:{tag_key[1]} is never observed "
                 f"(observed: {', '.join(str(k[1]) for k in obs.tag_keys)})"
             )
-        result[index[tag_key]] = T_map_tag.as_matrix()
-    return result
+        result[index[tag_key]] = anchor.T_map_tag.as_matrix()
+        sigmas[index[tag_key]] = anchor.sigmas(config)
+    return result, sigmas
 
 
 def _graph_input(
@@ -98,6 +111,7 @@ def _graph_input(
     anchors: Mapping[int, np.ndarray],
     M_map_base: np.ndarray,
     M_map_tag: Mapping[int, np.ndarray],
+    priors: Priors,
 ) -> GraphInput:
     rows = np.arange(len(obs))
     return GraphInput(
@@ -109,6 +123,8 @@ def _graph_input(
         M_map_anchor=anchors,
         M_map_base_init=M_map_base,
         M_map_tag_init=M_map_tag,
+        anchor_sigmas=priors.anchor_sigmas,
+        up_base=priors.up_base,
     )
 
 
@@ -123,9 +139,10 @@ def build_tag_map(
     Parameters
     ----------
     survey : Survey
-    anchors : mapping of tag id (or (family, id)) to SE3, optional
-        Surveyed ``T_map_tag`` of anchor tags, held by tight priors. None or empty: the first
-        tag seen defines ``map`` (identity pose).
+    anchors : mapping of tag id (or (family, id)) to SE3 or Anchor, optional
+        Surveyed ``T_map_tag`` of anchor tags, held by priors with their sigmas
+        (:class:`~tagloc.mapping.anchors.Anchor`; a bare SE3: the configuration's sigmas). None
+        or empty: the first tag seen defines ``map`` (identity pose).
     config : MapBuildConfig, optional
     progress : callable, optional
         ``progress(stage, done, total)`` for a progress bar.
@@ -154,7 +171,9 @@ def build_tag_map(
     timings["observations"] = time.perf_counter() - t_start
     # 2. initial values
     t = time.perf_counter()
-    M_anchor = _anchor_indices(anchors, obs, survey.source)
+    M_anchor, anchor_sigmas = _anchor_indices(anchors, obs, survey.source, config)
+    up_base = up_in_base(obs.T_odom_base.as_matrix().reshape(-1, 4, 4))
+    priors = Priors(anchor_sigmas, up_base if config.gravity.aligned_odometry else None)
     M_map_base = initialize_keyframes(obs, M_anchor, config.max_ambiguity_for_init)
     M_map_tag = initialize_tags(obs, M_map_base, M_anchor)
     branch = choose_branches(obs, M_map_base, M_map_tag)
@@ -173,7 +192,7 @@ def build_tag_map(
         for round_ in range(n_rounds):
             if progress is not None:
                 progress("optimize", round_, n_rounds)
-            data = _graph_input(obs, M_odom_base, branch, M_anchor, M_map_base, M_map_tag)
+            data = _graph_input(obs, M_odom_base, branch, M_anchor, M_map_base, M_map_tag, priors)
             solution = solve_graph(data, config)
             iterations += solution.iterations
             optimize_s += solution.optimize_s
@@ -208,6 +227,7 @@ def build_tag_map(
                 survey.cameras,
                 survey.T_base_cam,
                 config,
+                priors,
             )
             iterations += solution.iterations
             optimize_s += solution.optimize_s
@@ -224,7 +244,7 @@ def build_tag_map(
             solution = marginal_covariances(solution)
         elif config.compute_covariance:
             data = _graph_input(
-                obs, M_odom_base, branch, M_anchor, solution.M_map_base, solution.M_map_tag
+                obs, M_odom_base, branch, M_anchor, solution.M_map_base, solution.M_map_tag, priors
             )
             graph, values = build_graph(data, config)
             at = replace(solution, graph=graph, values=values)
@@ -235,9 +255,12 @@ def build_tag_map(
         raise exc.naming(tag_names) from None
     # 5. QA and the map
     t = time.perf_counter()
-    tag_map, report = _map_and_report(
+    tag_map, report = map_and_report(
         survey, obs, solution, set(M_anchor), M_map_base_odometry, config, set(ambiguous)
     )
+    object.__setattr__(report, "tilt_deg", map_tilt_deg(solution.M_map_base, up_base))
+    factors = graph_records(survey, obs, solution, M_odom_raw, state.c, held, priors, config)
+    object.__setattr__(report, "factors", factors)
     timings["report"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t_start
     object.__setattr__(report, "timings_s", timings)
@@ -250,80 +273,3 @@ def _odometry_in_map(obs: Observations, M_map_base_init: np.ndarray) -> np.ndarr
     """Keyframe odometry, aligned to ``map`` at the first keyframe (the 'before' trajectory)."""
     M_odom_base = obs.T_odom_base.as_matrix().reshape(-1, 4, 4)
     return np.asarray((M_map_base_init[0] @ inverse_h(M_odom_base[0])) @ M_odom_base)
-
-
-def _map_and_report(
-    survey: Survey,
-    obs: Observations,
-    solution: GraphSolution,
-    anchor_indices: set[int],
-    M_map_base_odometry: np.ndarray,
-    config: MapBuildConfig,
-    ambiguous: set[int],
-) -> tuple[TagMap, BuildReport]:
-    residual = reprojection_residuals(
-        obs, solution.M_map_base, solution.M_map_tag, survey.cameras, survey.T_base_cam
-    )
-    outlier = solution.mahalanobis > config.outlier_sigma
-    cams = np.array(obs.camera)
-    entries, qa = [], []
-    for j in sorted(solution.M_map_tag):
-        family, tag_id = obs.tag_keys[j]
-        idx = np.flatnonzero(obs.tag == j)
-        n_out = int(outlier[idx].sum())
-        disagreeing = n_out >= 3 and n_out > config.disagreeing_fraction * len(idx)
-        cov = solution.cov_map_tag.get(j)
-        sigma = float(np.sqrt(np.trace(cov[:3, :3]))) if cov is not None else float("nan")
-        T_map_tag = SE3.from_matrix(solution.M_map_tag[j], normalize=True)
-        note = (
-            f"built from {len(idx)} observations"
-            + (f"; {n_out} disagree (moved or duplicated?)" if disagreeing else "")
-            + ("; tilt ambiguous (seen only face-on or far)" if j in ambiguous else "")
-        )
-        entries.append(
-            TagEntry.from_pose(
-                tag_id,
-                T_map_tag,
-                float(obs.tag_sizes[j]),
-                family=family,
-                anchor=j in anchor_indices,
-                observations=len(idx),
-                covariance=cov,
-                note=note,
-            )
-        )
-        qa.append(
-            TagQA(
-                family,
-                tag_id,
-                len(idx),
-                n_out,
-                rms(residual[idx[~outlier[idx]]]),
-                sigma,
-                tuple(sorted(set(cams[idx].tolist()))),
-                j in anchor_indices,
-                disagreeing,
-                j in ambiguous,
-            )
-        )
-    inlier = ~outlier
-    report = BuildReport(
-        source=survey.source,
-        tags=tuple(qa),
-        reproj_rms_px=rms(residual[inlier]),
-        reproj_rms_px_per_camera={
-            str(c): rms(residual[inlier & (cams == c)]) for c in sorted(set(obs.camera))
-        },
-        observations=len(obs),
-        outliers=int(outlier.sum()),
-        keyframes=len(obs.keyframe_stamps_ns),
-        dropped=dict(obs.dropped),
-        disagreeing_tags=tuple(t.tag_id for t in qa if t.disagreeing),
-        keyframe_stamps_ns=obs.keyframe_stamps_ns,
-        T_map_base_odometry=SE3.from_matrix(M_map_base_odometry, normalize=True),
-        T_map_base_optimized=SE3.from_matrix(solution.M_map_base, normalize=True),
-        iterations=solution.iterations,
-        error_initial=solution.error_initial,
-        error_final=solution.error_final,
-    )
-    return TagMap.from_entries(entries), report

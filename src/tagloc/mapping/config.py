@@ -38,6 +38,27 @@ class OdometryNoise(BaseModel):
     rotation_floor_rad: float = Field(1e-4, gt=0.0)
 
 
+class GravityConfig(BaseModel):
+    """Roll and pitch priors from a gravity-aligned odometry (:mod:`tagloc.mapping.gravity`).
+
+    Attributes
+    ----------
+    aligned_odometry : bool
+        The odometry frame's z axis is "up" (visual-inertial odometry: gravity is observable to
+        it, so its roll and pitch do not drift). Then every keyframe's roll and pitch enter the
+        graph as priors, and the map is level by physics, not by the anchors' orientation.
+        Default off (wheel or legged odometry whose frame is only as level as its start).
+    sigma_deg : float
+        Standard deviation of each keyframe's gravity direction, degrees (per keyframe,
+        independent).
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    aligned_odometry: bool = False
+    sigma_deg: float = Field(1.0, gt=0.0, le=45.0)
+
+
 class MapBuildConfig(BaseModel):
     """How :func:`tagloc.mapping.build_tag_map` turns a survey into a tag map.
 
@@ -77,7 +98,13 @@ class MapBuildConfig(BaseModel):
         A tag with at least 3 outliers making up more than this fraction of its observations is
         flagged in the report as moved or duplicated.
     anchor_sigma_m, anchor_sigma_rad : float
-        Prior standard deviations on anchor tags.
+        Prior standard deviations on anchor tags that do not carry their own
+        (:class:`tagloc.mapping.anchors.Anchor`: a measured anchor's survey sigma).
+    gravity : GravityConfig
+        Roll and pitch priors from a gravity-aligned odometry (default off).
+    uncertainty_flag_m : float
+        A tag whose marginal position sigma (the norm of its x, y, z sigmas) exceeds this is
+        flagged in the QA report with advice (:mod:`tagloc.mapping.advice`). Default 5 cm.
     max_iterations : int
         Levenberg-Marquardt iterations per round of pose factors.
     corner_max_iterations : int
@@ -125,3 +152,5 @@ class MapBuildConfig(BaseModel):
     calibration_rounds: int = Field(0, ge=0)
     joint_calibration: bool = False
     calibration_sigma: float = Field(0.1, gt=0.0)
+    gravity: GravityConfig = GravityConfig()
+    uncertainty_flag_m: float = Field(0.05, gt=0.0)

@@ -10,7 +10,9 @@ Variables: ``x_k`` = ``T_map_base`` of keyframe ``k``; ``l_j`` = ``T_map_tag`` o
 - tag observation ``BetweenFactorPose3(x_k, l_j, T_base_tag)`` with the PnP covariance of the
   chosen IPPE branch (right tangent, so the factor's error ``Log(Z^-1 x_k^-1 l_j)`` has exactly
   that covariance), under a Huber or Cauchy kernel so that outliers cannot fold the map;
-- ``PriorFactorPose3`` on anchor tags.
+- ``PriorFactorPose3`` on anchor tags (each with its own sigmas, :mod:`tagloc.mapping.anchors`);
+- with a gravity-aligned odometry, an attitude prior on every keyframe
+  (:mod:`tagloc.mapping.gravity`).
 
 Solved with Levenberg-Marquardt; tag covariances from ``gtsam.Marginals``.
 """
@@ -19,7 +21,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import gtsam
 import numpy as np
@@ -27,6 +29,7 @@ import numpy.typing as npt
 
 from tagloc.geometry import SE3
 from tagloc.mapping.config import MapBuildConfig, OdometryNoise
+from tagloc.mapping.gravity import add_gravity_factors
 from tagloc.mapping.gtsam_bridge import PERM, cov_from_gtsam, diagonal_sigmas, solver_errors
 from tagloc.mapping.initialize import inverse_h, rotation_angle
 
@@ -62,6 +65,12 @@ class GraphInput:
         Anchor tags' surveyed ``T_map_tag``; empty: the first initial tag is held as the origin.
     M_map_base_init : (K, 4, 4) float
     M_map_tag_init : mapping of int to (4, 4) float
+    anchor_sigmas : mapping of int to (6,) float
+        Prior standard deviations ``[x, y, z, rx, ry, rz]`` of held tags (m, rad); a tag not in
+        it gets the configuration's ``anchor_sigma_m``, ``anchor_sigma_rad``.
+    up_base : (K, 3) float or None
+        Gravity "up" in each keyframe's ``base`` (:mod:`tagloc.mapping.gravity`): one attitude
+        prior per keyframe; None: no gravity priors.
     """
 
     M_odom_base: FloatArray
@@ -72,6 +81,8 @@ class GraphInput:
     M_map_anchor: Mapping[int, FloatArray]
     M_map_base_init: FloatArray
     M_map_tag_init: Mapping[int, FloatArray]
+    anchor_sigmas: Mapping[int, FloatArray] = field(default_factory=dict)
+    up_base: FloatArray | None = None
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -162,9 +173,13 @@ def add_odometry_and_anchors(
         if odo_kernel is not None:
             model = gtsam.noiseModel.Robust.Create(odo_kernel, model)
         graph.add(gtsam.BetweenFactorPose3(X(k), X(k + 1), _pose3(M), model))
-    sigmas = [config.anchor_sigma_m] * 3 + [config.anchor_sigma_rad] * 3
+    default = [config.anchor_sigma_m] * 3 + [config.anchor_sigma_rad] * 3
     for j, M in held_tags(data.M_map_anchor, data.tag, data.M_map_tag_init).items():
+        sigmas = data.anchor_sigmas.get(j, default)
         graph.add(gtsam.PriorFactorPose3(L(j), _pose3(M), diagonal_sigmas(sigmas)))
+    if data.up_base is not None:  # gravity priors (mapping.gravity)
+        keys = [X(k) for k in range(len(data.up_base))]
+        add_gravity_factors(graph, keys, data.up_base, np.radians(config.gravity.sigma_deg))
 
 
 def build_graph(

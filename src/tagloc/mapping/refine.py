@@ -5,7 +5,8 @@ Starting from the pose-factor solution, each round
 1. linearizes every factor at the current estimate, in numpy: the corners of every observation
    (:mod:`tagloc.mapping.corner_graph`, robust kernel as IRLS weights, false detections left
    out), the odometry steps with the calibration vector ``c`` as a variable
-   (:mod:`tagloc.mapping.odometry_factors`), priors on the anchors and a broad prior on ``c``;
+   (:mod:`tagloc.mapping.odometry_factors`), priors on the anchors (:class:`Priors`: each with its
+   sigmas), gravity priors (:mod:`tagloc.mapping.gravity`) and a broad prior on ``c``;
 2. solves the sparse normal equations with GTSAM (``GaussianFactorGraph.optimize``: COLAMD
    ordering, multifrontal Cholesky);
 3. retracts (``T Exp(delta)``) with a backtracking line search on the robust objective, so it
@@ -22,7 +23,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import gtsam
 import numpy as np
@@ -42,6 +43,7 @@ from tagloc.mapping.corner_graph import (
 )
 from tagloc.mapping.flips import flip_stuck_tags
 from tagloc.mapping.graph import GraphSolution, L, X, odometry_sigmas
+from tagloc.mapping.gravity import gravity_jacobians, gravity_residuals
 from tagloc.mapping.gtsam_bridge import solver_errors
 from tagloc.mapping.initialize import inverse_h, rotation_angle
 from tagloc.mapping.observations import Observations
@@ -60,6 +62,16 @@ CAL = int(gtsam.symbol("c", 0))
 _LINE_SEARCH_STEPS = 6
 #: Corner refinements after which stuck tilts are tested and flipped (then refined again).
 MAX_FLIP_PASSES = 2
+
+
+@dataclass(frozen=True, slots=True)
+class Priors:
+    """Priors besides the corners and the odometry: each held tag's sigmas ``(6,)`` (m, rad;
+    missing: the configuration's defaults), gravity "up" ``(K, 3)`` in each keyframe's base
+    (None: no gravity priors, :mod:`tagloc.mapping.gravity`)."""
+
+    anchor_sigmas: Mapping[int, FloatArray] = field(default_factory=dict)
+    up_base: FloatArray | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -82,13 +94,18 @@ class _Problem:
         cameras: Mapping[str, CameraModel],
         T_base_cam: Mapping[str, SE3],
         config: MapBuildConfig,
+        priors: Priors | None = None,
     ) -> None:
         self.obs, self.held, self.config = obs, dict(held), config
+        priors = priors or Priors()
         self.calibrate = config.joint_calibration
         self.cameras, self.T_base_cam = cameras, T_base_cam
         self.step_raw = inverse_h(M_odom_raw[:-1]) @ M_odom_raw[1:]
         self.sigmas = odometry_sigmas(M_odom_raw, config.odometry)
-        self.held_sigmas = np.array([config.anchor_sigma_m] * 3 + [config.anchor_sigma_rad] * 3)
+        default = np.array([config.anchor_sigma_m] * 3 + [config.anchor_sigma_rad] * 3)
+        self.held_sigmas = {j: np.asarray(priors.anchor_sigmas.get(j, default)) for j in held}
+        self.up_base = priors.up_base
+        self.gravity_sigma = float(np.radians(config.gravity.sigma_deg))
         self.kind, self.k = config.robust, config.robust_k
         # the corners of the last state asked for: the objective of the line search's accepted
         # step is evaluated there, and the next round linearizes there
@@ -121,8 +138,11 @@ class _Problem:
         total += float(np.sum(0.5 * s if k is None else kernel_cost(s, "huber", k)))
         for j, M in self.held.items():
             total += 0.5 * float(
-                np.sum(prior_residuals(state.M_map_tag[j][None], M[None], self.held_sigmas) ** 2)
+                np.sum(prior_residuals(state.M_map_tag[j][None], M[None], self.held_sigmas[j]) ** 2)
             )
+        if self.up_base is not None:
+            g = gravity_residuals(state.M_map_base, self.up_base, self.gravity_sigma)
+            total += 0.5 * float(np.sum(g**2))
         if self.calibrate:
             total += 0.5 * float(np.sum((state.c / self.config.calibration_sigma) ** 2))
         return total
@@ -151,8 +171,15 @@ class _Problem:
                     -e[k], unit6,
                 ))  # fmt: skip
         for j, M in self.held.items():
-            e_held = prior_residuals(state.M_map_tag[j][None], M[None], self.held_sigmas)[0]
-            graph.add(gtsam.JacobianFactor(L(j), np.diag(1.0 / self.held_sigmas), -e_held, unit6))
+            sigmas = self.held_sigmas[j]
+            e_held = prior_residuals(state.M_map_tag[j][None], M[None], sigmas)[0]
+            graph.add(gtsam.JacobianFactor(L(j), np.diag(1.0 / sigmas), -e_held, unit6))
+        if self.up_base is not None:  # gravity priors (mapping.gravity)
+            g = gravity_residuals(state.M_map_base, self.up_base, self.gravity_sigma)
+            A_g = gravity_jacobians(state.M_map_base, self.gravity_sigma)
+            unit3 = gtsam.noiseModel.Unit.Create(3)
+            for k in range(len(g)):
+                graph.add(gtsam.JacobianFactor(X(k), A_g[k], -g[k], unit3))
         if self.calibrate:
             s = self.config.calibration_sigma
             graph.add(gtsam.JacobianFactor(
@@ -192,6 +219,7 @@ def refine_with_corners(
     cameras: Mapping[str, CameraModel],
     T_base_cam: Mapping[str, SE3],
     config: MapBuildConfig,
+    priors: Priors | None = None,
 ) -> tuple[GraphSolution, State]:
     """Refine ``start`` with the corners (module docstring).
 
@@ -208,6 +236,8 @@ def refine_with_corners(
     config : MapBuildConfig
         ``joint_calibration``: estimate the odometry calibration vector jointly (else it stays
         at ``start.c``).
+    priors : Priors, optional
+        Anchor sigmas and gravity (default: configuration sigmas, no gravity).
 
     Returns
     -------
@@ -215,7 +245,7 @@ def refine_with_corners(
         ``mahalanobis`` is the corners' whitened norm per observation; ``linear`` the last
         linearization (for :func:`tagloc.mapping.graph.marginal_covariances`).
     """
-    problem = _Problem(obs, M_odom_raw, held, cameras, T_base_cam, config)
+    problem = _Problem(obs, M_odom_raw, held, cameras, T_base_cam, config, priors)
     calibrate = problem.calibrate
     state, cost = start, problem.objective(start)
     cost_initial, rounds, solve_s = cost, 0, 0.0
@@ -268,6 +298,7 @@ def refine_and_test_tilts(
     cameras: Mapping[str, CameraModel],
     T_base_cam: Mapping[str, SE3],
     config: MapBuildConfig,
+    priors: Priors | None = None,
 ) -> tuple[GraphSolution, State, list[int]]:
     """Refine, test every tag's tilt (:mod:`tagloc.mapping.flips`), refine again while tags
     flip (at most :data:`MAX_FLIP_PASSES` tests).
@@ -279,7 +310,7 @@ def refine_and_test_tilts(
     ambiguous: list[int] = []
     for pass_ in range(MAX_FLIP_PASSES + 1):
         solution, state = refine_with_corners(
-            obs, M_odom_raw, state, held, cameras, T_base_cam, config
+            obs, M_odom_raw, state, held, cameras, T_base_cam, config, priors
         )
         rounds += solution.iterations
         solve_s += solution.optimize_s

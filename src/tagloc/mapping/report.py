@@ -41,6 +41,9 @@ class TagQA:
     anchor: bool
     disagreeing: bool
     tilt_ambiguous: bool = False
+    rotation_sigma_deg: float = float("nan")
+    uncertain: bool = False
+    advice: str = ""
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -67,6 +70,17 @@ class BuildReport:
     timings_s : dict of str to float
         ``observations`` (PnP), ``initialize``, ``optimize`` (GTSAM LM, all rounds),
         ``graph`` (building graphs and reading results), ``covariance``, ``report``, ``total``.
+    tilt_deg : float
+        Angle between the map's z and the odometry frame's z carried into ``map`` by the
+        optimized keyframes (:func:`tagloc.mapping.gravity.map_tilt_deg`): the map's tilt against
+        gravity when the odometry is gravity-aligned.
+    gravity_priors : bool
+        Whether keyframes had gravity priors (``MapBuildConfig.gravity.aligned_odometry``).
+    uncertainty_flag_m : float
+        The position sigma above which a tag is flagged ``uncertain`` (with advice).
+    factors : tuple of dict
+        Every factor with its residual at the solution, header first
+        (:mod:`tagloc.mapping.graph_export`); :meth:`graph_jsonl` writes them.
     """
 
     source: str
@@ -85,6 +99,15 @@ class BuildReport:
     error_initial: float
     error_final: float
     timings_s: dict[str, float] = field(default_factory=dict)
+    tilt_deg: float = float("nan")
+    gravity_priors: bool = False
+    uncertainty_flag_m: float = float("nan")
+    factors: tuple[dict[str, Any], ...] = ()
+
+    @property
+    def uncertain_tags(self) -> tuple[int, ...]:
+        """Ids of the tags whose position sigma exceeds ``uncertainty_flag_m``."""
+        return tuple(t.tag_id for t in self.tags if t.uncertain)
 
     def correction_m(self) -> FloatArray:
         """``(K,)`` distance between odometry and optimized keyframe positions, m."""
@@ -108,6 +131,10 @@ class BuildReport:
                 k: round(v, 4) for k, v in self.reproj_rms_px_per_camera.items()
             },
             "disagreeing_tags": list(self.disagreeing_tags),
+            "uncertain_tags": list(self.uncertain_tags),
+            "uncertainty_flag_m": self.uncertainty_flag_m,
+            "tilt_deg": round(self.tilt_deg, 4),
+            "gravity_priors": self.gravity_priors,
             "max_odometry_correction_m": round(float(self.correction_m().max()), 4),
             "iterations": self.iterations,
             "error_initial": self.error_initial,
@@ -121,6 +148,9 @@ class BuildReport:
                     "outliers": t.outliers,
                     "reproj_rms_px": round(t.reproj_rms_px, 4),
                     "position_sigma_mm": round(1000 * t.position_sigma_m, 3),
+                    "rotation_sigma_deg": round(t.rotation_sigma_deg, 4),
+                    "uncertain": t.uncertain,
+                    "advice": t.advice,
                     "cameras": list(t.cameras),
                     "anchor": t.anchor,
                     "disagreeing": t.disagreeing,
@@ -129,6 +159,10 @@ class BuildReport:
                 for t in self.tags
             ],
         }
+
+    def graph_jsonl(self) -> str:
+        """:attr:`factors` as JSON lines (``tagloc map build --export-graph``)."""
+        return "".join(json.dumps(f, separators=(",", ":")) + "\n" for f in self.factors)
 
     def to_json(self) -> str:
         """:meth:`to_dict` as indented JSON."""
@@ -149,6 +183,12 @@ class BuildReport:
             + (", ".join(str(i) for i in self.disagreeing_tags) or "none"),
             "tilt ambiguous (seen only face-on or far; check their orientation): "
             + (", ".join(str(t.tag_id) for t in self.tags if t.tilt_ambiguous) or "none"),
+            f"map tilt against the odometry's gravity {self.tilt_deg:.2f} deg ("
+            + ("gravity priors on" if self.gravity_priors else "no gravity priors")
+            + ")",
+            f"uncertain tags (position sigma > {100 * self.uncertainty_flag_m:.0f} cm): "
+            + (", ".join(str(i) for i in self.uncertain_tags) or "none"),
+            *(f"  tag {t.tag_id}: {t.advice}" for t in self.tags if t.uncertain and t.advice),
             f"time {t.get('total', 0.0):.2f} s (PnP {t.get('observations', 0.0):.2f} s, "
             f"optimize {t.get('optimize', 0.0):.2f} s, "
             f"covariance {t.get('covariance', 0.0):.2f} s)",
@@ -159,15 +199,17 @@ class BuildReport:
         lines = ["# Tag map build report", "", *(f"- {line}" for line in self.summary_lines())]
         lines += [
             "",
-            "| tag | obs | outliers | reproj RMS px | sigma mm | cameras | note |",
-            "|---:|---:|---:|---:|---:|---|---|",
+            "| tag | obs | outliers | reproj RMS px | sigma mm | sigma deg | cameras | note |",
+            "|---:|---:|---:|---:|---:|---:|---|---|",
         ]
         for t in self.tags:
             note = "anchor" if t.anchor else ("DISAGREES" if t.disagreeing else "")
             note += " tilt ambiguous" if t.tilt_ambiguous else ""
+            note += f" UNCERTAIN: {t.advice}" if t.uncertain else ""
             lines.append(
                 f"| {t.tag_id} | {t.observations} | {t.outliers} | {t.reproj_rms_px:.2f} | "
-                f"{1000 * t.position_sigma_m:.1f} | {' '.join(t.cameras)} | {note} |"
+                f"{1000 * t.position_sigma_m:.1f} | {t.rotation_sigma_deg:.2f} | "
+                f"{' '.join(t.cameras)} | {note.strip()} |"
             )
         return "\n".join(lines) + "\n"
 
@@ -180,7 +222,22 @@ def reprojection_residuals(
     T_base_cam: Mapping[str, SE3],
 ) -> FloatArray:
     """``(M,)`` RMS corner reprojection residual of each observation at the given poses, px."""
-    rms = np.full(len(obs), np.nan)
+    err = np.linalg.norm(
+        corner_residuals_px(obs, M_map_base, M_map_tag, cameras, T_base_cam), axis=2
+    )
+    return np.asarray(np.sqrt(np.mean(err**2, axis=1)))
+
+
+def corner_residuals_px(
+    obs: Observations,
+    M_map_base: FloatArray,
+    M_map_tag: Mapping[int, FloatArray],
+    cameras: Mapping[str, CameraModel],
+    T_base_cam: Mapping[str, SE3],
+) -> FloatArray:
+    """``(M, 4, 2)`` projected minus detected corners of each observation at the given poses, px
+    (NaN where a corner does not project)."""
+    out = np.full((len(obs), 4, 2), np.nan)
     cams = np.array(obs.camera)
     tags = np.array([M_map_tag[int(j)] for j in obs.tag])
     M_base_tag = inverse_h(M_map_base[obs.keyframe]) @ tags
@@ -193,12 +250,19 @@ def reprojection_residuals(
         )
         with np.errstate(all="ignore"):
             px = cameras[str(name)].project(points_cam.reshape(-1, 3)).reshape(-1, 4, 2)
-        err = np.linalg.norm(px - obs.corners_px[idx], axis=2)
-        rms[idx] = np.sqrt(np.mean(err**2, axis=1))
-    return rms
+        out[idx] = px - obs.corners_px[idx]
+    return out
 
 
 def rms(values: FloatArray) -> float:
     """Root mean square of the finite values (NaN if none)."""
     v = values[np.isfinite(values)]
     return float(np.sqrt(np.mean(v**2))) if len(v) else float("nan")
+
+
+def tag_sigmas(cov: Mapping[int, FloatArray]) -> tuple[dict[int, float], dict[int, float]]:
+    """Position sigma (m, the root of the trace of the x, y, z block) and rotation sigma (deg,
+    the same of the rx, ry, rz block) of each covariance ``[x, y, z, rx, ry, rz]``."""
+    pos = {j: float(np.sqrt(max(np.trace(c[:3, :3]), 0.0))) for j, c in cov.items()}
+    rot = {j: float(np.degrees(np.sqrt(max(np.trace(c[3:, 3:]), 0.0)))) for j, c in cov.items()}
+    return pos, rot

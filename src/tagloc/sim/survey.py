@@ -16,6 +16,7 @@ import numpy.typing as npt
 
 from tagloc.mapping.builder import ProgressFn, build_tag_map
 from tagloc.mapping.config import MapBuildConfig, OdometryNoise
+from tagloc.mapping.exclude import Exclusion, exclude_observations
 from tagloc.mapping.report import BuildReport
 from tagloc.mapping.survey import CameraFrame, MappingError, Survey
 from tagloc.sim.drive import Drive
@@ -110,6 +111,7 @@ def build_map_from_drive(
     config: MapBuildConfig | None = None,
     camera_stride: int = 1,
     progress: ProgressFn | None = None,
+    exclusions: Sequence[Exclusion] = (),
 ) -> tuple[TagMap, BuildReport]:
     """Map the tags of a simulated drive (the demo's entry point).
 
@@ -127,6 +129,8 @@ def build_map_from_drive(
         Use every n-th camera frame.
     progress : callable, optional
         See :func:`tagloc.mapping.build_tag_map`.
+    exclusions : sequence of Exclusion
+        Observations left out (:func:`tagloc.mapping.exclude.exclude_observations`).
 
     Raises
     ------
@@ -135,7 +139,7 @@ def build_map_from_drive(
         the route).
     """
     observed = _observed(drive, observation_config, camera_stride)
-    survey = _survey(drive, observed)
+    survey = exclude_observations(_survey(drive, observed), exclusions)
     world = drive.world
     if anchors is None:  # the first tag truly detected (not an injected glint)
         first = next((s.tag_id for f in observed for s in f.truth if s.detected), None)

@@ -9,10 +9,13 @@ viewer, x to the viewer's right, y up; ``size`` is the black-border edge in metr
 File format (version 1): ``version: 1``, ``frames: [map, ...]`` and ``tags:``, one block per tag
 with its keys in this order: ``id``, ``family`` (default tag36h11), ``size``, ``frame`` (default
 map), ``position: [x, y, z]`` (m), ``quat_xyzw: [x, y, z, w]`` (unit within 1e-6, never
-normalized on load), and optionally ``anchor: true`` (surveyed pose, kept fixed by the map
-builder), ``observations`` (count from the builder), ``note`` (one line) and ``covariance``
-(6x6 of the right perturbation ``T_frame_tag (+) [x, y, z, rx, ry, rz]``, m and rad; 6 rows of
-6 numbers, or 36 numbers; symmetric positive semi-definite).
+normalized on load), and optionally ``anchor: true`` (surveyed pose, a prior of the map
+builder), ``anchor_sigma: {position_m, rotation_deg}`` (the survey's standard deviation per axis,
+metres and degrees; only on anchors; without it the builder's default), ``observations``
+(count from the builder), ``note`` (one line) and ``covariance`` (6x6 of the right
+perturbation ``T_frame_tag (+) [x, y, z, rx, ry, rz]``, m and rad; 6 rows of 6 numbers, or 36
+numbers; symmetric positive semi-definite; the builder writes each tag's marginal covariance, and
+its note gives the sigmas in cm and degrees).
 
 Saving is stable (same map, same bytes): positions and sizes with 6 decimals (micrometres),
 quaternions with 9 (normalized, ``w >= 0``), covariances with 3 significant digits (symmetrized;
@@ -87,6 +90,13 @@ Real = Annotated[float, pydantic.BeforeValidator(_not_bool)]
 Row6 = tuple[Real, Real, Real, Real, Real, Real]
 
 
+class AnchorSigma(StrictModel):
+    """Standard deviation of a surveyed anchor pose, per axis: metres and degrees."""
+
+    position_m: Real = Field(gt=0.0, le=10.0)
+    rotation_deg: Real = Field(gt=0.0, le=90.0)
+
+
 class TagEntry(StrictModel):
     """One tag: identity, printed size, and its pose ``T_frame_tag`` in ``frame``.
 
@@ -103,6 +113,7 @@ class TagEntry(StrictModel):
     position: tuple[Real, Real, Real]
     quat_xyzw: tuple[Real, Real, Real, Real]
     anchor: bool = Field(default=False, strict=True)
+    anchor_sigma: AnchorSigma | None = None
     observations: int | None = Field(default=None, strict=True)
     note: str = ""
     covariance: tuple[Row6, Row6, Row6, Row6, Row6, Row6] | None = None
@@ -382,6 +393,8 @@ def _entry_problem(tag: TagEntry) -> tuple[Path_, str] | None:
         return ("id",), f"{tag.id} is out of range for {tag.family} (0..{num_ids - 1})"
     if tag.size <= 0:
         return ("size",), "must be > 0"
+    if tag.anchor_sigma is not None and not tag.anchor:
+        return ("anchor_sigma",), "only an anchor (anchor: true) has an anchor_sigma"
     if not MIN_TAG_SIZE_M <= tag.size <= MAX_TAG_SIZE_M:
         bounds = f"[{MIN_TAG_SIZE_M:g}, {MAX_TAG_SIZE_M:g}]"
         return ("size",), f"{tag.size:g} is outside {bounds}: sizes are metres, not millimetres"
@@ -436,7 +449,8 @@ _HEADER = (
     "# quat_xyzw: [x, y, z, w] (ROS/scipy order), unit norm within 1e-6, written with w >= 0.",
     "# covariance (optional): 6x6 rows of the right perturbation T_frame_tag (+) [x, y, z, rx,",
     "#   ry, rz] (metres, radians; translation first, as ROS PoseWithCovariance).",
-    "# anchor: true = surveyed pose, kept fixed by the map builder. observations: builder count.",
+    "# anchor: true = surveyed pose, a prior of the map builder; anchor_sigma: its standard",
+    "#   deviation per axis {position_m, rotation_deg}. observations: builder count.",
     "# Tags are sorted by (family, id). Saving rewrites the file: comments are lost; use note.",
 )
 
@@ -500,6 +514,12 @@ def _entry_lines(tag: TagEntry) -> list[str]:
     ]
     if tag.anchor:
         lines.append("    anchor: true")
+    if tag.anchor_sigma is not None:
+        sigma = tag.anchor_sigma
+        lines.append(
+            f"    anchor_sigma: {{position_m: {sigma.position_m:.6g}, "
+            f"rotation_deg: {sigma.rotation_deg:.6g}}}"
+        )
     if tag.observations is not None:
         lines.append(f"    observations: {tag.observations}")
     if tag.note:

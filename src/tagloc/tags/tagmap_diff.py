@@ -10,6 +10,13 @@ run rewrites) are not.
 
 :func:`format_tag_map_diff` gives one line per change, sorted (frames first, then by family and
 id), e.g. ``~ tag36h11:17 moved 3.0 cm [+3.0, +0.0, +0.0] cm in map, rotated 2.0 deg``.
+
+When both entries carry a covariance (the builder writes one), a move also tells whether it is
+beyond the two maps' combined uncertainty: the Mahalanobis norm of the 6-dof change
+``Log(T_old^-1 T_new)`` under ``C_old + C_new`` (both right-tangent, ``[x, y, z, rx, ry, rz]``),
+against :data:`MOVE_SIGMAS` (the 99 % quantile of a chi-square with 6 degrees of freedom, as a
+norm): ``..., 7.2 sigma: beyond their uncertainty`` (the tag really moved, or one map is wrong)
+or ``..., 1.1 sigma: within their uncertainty`` (two surveys of the same wall).
 """
 
 from __future__ import annotations
@@ -23,6 +30,9 @@ import numpy as np
 from tagloc.tags.tagmap import TagEntry, TagMap
 
 #: Order of the lines of one tag in the formatted diff.
+#: A move whose Mahalanobis norm exceeds this is beyond the maps' combined uncertainty
+#: (``sqrt(chi2.ppf(0.99, 6))``).
+MOVE_SIGMAS = 4.1
 _KIND_ORDER = ("removed", "added", "family", "frame", "moved", "size", "anchor", "note")
 
 
@@ -42,6 +52,9 @@ class TagMove:
         Norm of ``delta_position``, metres.
     rotation_deg : float
         Angle of the relative rotation ``R_old^T R_new``, degrees, in ``[0, 180]``.
+    sigmas : float or None
+        Mahalanobis norm of the change under both entries' covariances (module docstring); None
+        when either has none.
     """
 
     key: tuple[str, int]
@@ -49,6 +62,12 @@ class TagMove:
     delta_position: tuple[float, float, float]
     translation_m: float
     rotation_deg: float
+    sigmas: float | None = None
+
+    @property
+    def beyond_uncertainty(self) -> bool | None:
+        """Whether :attr:`sigmas` exceeds :data:`MOVE_SIGMAS` (None without covariances)."""
+        return None if self.sigmas is None else self.sigmas > MOVE_SIGMAS
 
 
 @dataclass(frozen=True, slots=True)
@@ -146,7 +165,18 @@ def _compare(
     if translation_m <= min_move_m and rotation_deg <= min_rot_deg:
         return None, changes
     x, y, z = (float(v) for v in delta)
-    return TagMove(old.key, old.frame, (x, y, z), translation_m, rotation_deg), changes
+    sigmas = _mahalanobis(old, new)
+    return TagMove(old.key, old.frame, (x, y, z), translation_m, rotation_deg, sigmas), changes
+
+
+def _mahalanobis(old: TagEntry, new: TagEntry) -> float | None:
+    C_old, C_new = old.covariance_matrix(), new.covariance_matrix()
+    if C_old is None or C_new is None:
+        return None
+    xi = np.asarray((old.T_frame_tag().inverse() @ new.T_frame_tag()).log(), dtype=np.float64)
+    C = C_old + C_new
+    # pseudo-inverse: an anchor's covariance may be (numerically) singular
+    return float(np.sqrt(max(float(xi @ np.linalg.pinv(C, rcond=1e-12) @ xi), 0.0)))
 
 
 def format_tag_map_diff(diff: TagMapDiff) -> list[str]:
@@ -170,7 +200,7 @@ def format_tag_map_diff(diff: TagMapDiff) -> list[str]:
                 (
                     f"~ {_name(move.key)} moved {100 * move.translation_m:.1f} cm "
                     f"[{dx}, {dy}, {dz}] cm "
-                    f"in {move.frame}, rotated {move.rotation_deg:.1f} deg"
+                    f"in {move.frame}, rotated {move.rotation_deg:.1f} deg" + _uncertainty(move)
                 ),
             )
         )
@@ -180,6 +210,13 @@ def format_tag_map_diff(diff: TagMapDiff) -> list[str]:
         line = f"~ {_name(change.key)} {change.field} {old} -> {new}{unit}"
         keyed.append((change.key, _KIND_ORDER.index(change.field), line))
     return lines + [line for *_, line in sorted(keyed)]
+
+
+def _uncertainty(move: TagMove) -> str:
+    if move.sigmas is None:
+        return ""
+    where = "beyond" if move.beyond_uncertainty else "within"
+    return f", {move.sigmas:.1f} sigma: {where} their uncertainty"
 
 
 def _name(key: tuple[str, int]) -> str:
