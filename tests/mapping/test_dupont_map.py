@@ -82,7 +82,7 @@ def test_corner_order_is_pinned_by_gravity(rig_and_survey: tuple[RigConfig, Surv
 def test_all_twenty_tags_are_mapped_with_sub_pixel_residuals(
     built: tuple[TagMap, BuildReport, float],
 ) -> None:
-    tag_map, report, seconds = built
+    tag_map, report, _ = built
     assert len(tag_map) == 20 and tag_map.get(381) is None
     assert [e.id for e in tag_map.anchors] == [6]
     assert report.dropped["ignored_tag"] == 1
@@ -90,7 +90,7 @@ def test_all_twenty_tags_are_mapped_with_sub_pixel_residuals(
     assert all(v < 0.55 for v in report.reproj_rms_px_per_camera.values())
     assert report.outliers < 0.02 * report.observations
     assert report.correction_m().max() > 1.0  # the VIO really drifted
-    assert seconds < 20.0
+    # its speed is measured by benchmarks/bench_mapping.py, not asserted here
 
 
 @pytest.mark.slow
