@@ -22,9 +22,12 @@ from tagloc.cli.options import duration_range, in_range, seed_range
 from tagloc.fileutil import check_outputs
 
 if TYPE_CHECKING:
+    from tagloc.camera import CameraModel
+    from tagloc.geometry import SE3
     from tagloc.localize.config import LocalizerConfig
-    from tagloc.localize.node import LocalizerNode
+    from tagloc.localize.node import LocalizerNode, NodeTopics
     from tagloc.messages import Message
+    from tagloc.tags import TagMap
 
 logger = logging.getLogger(__name__)
 #: Files ``tagloc localize`` writes into ``--out``.
@@ -57,6 +60,15 @@ def localize(
     out: Annotated[Path, typer.Option(help="Output directory.")] = Path("out/localize"),
     config: Annotated[Path | None, typer.Option(help="localizer.yaml.")] = None,
     cameras: Annotated[Path | None, typer.Option(help="Kalibr camchain yaml.")] = None,
+    camera_poses: Annotated[
+        Path | None, typer.Option(help="camera_poses.yaml: T_body_cam (with --cameras).")
+    ] = None,
+    tagslam: Annotated[
+        Path | None, typer.Option(help="tagslam.yaml: T_body_odom (odometry child in body).")
+    ] = None,
+    corner_order: Annotated[
+        str, typer.Option(help="How the bag lists corners, e.g. bl_br_tr_tl.")
+    ] = "tl_tr_br_bl",
     odom_topic: Annotated[str, typer.Option(help="Odometry.")] = "/odom",
     detections_topic: Annotated[str, typer.Option(help="Tag corners.")] = "/tag_detections",
     image_topic: Annotated[str, typer.Option(help="Images.")] = "/camera/image",
@@ -82,9 +94,10 @@ def localize(
 
     if (bag is None) == (scenario is None):
         raise LocalizeError("give exactly one input: a bag path or --scenario NAME")
+    cam = BagCamera(cameras, camera_poses, tagslam, corner_order)
     check_outputs(
         {"--out": out}, directories={"--out": OUTPUT_FILES},
-        inputs={"BAG": bag, "--tags": tags, "--config": config, "--cameras": cameras},
+        inputs={"BAG": bag, "--tags": tags, "--config": config, **cam.inputs()},
     )  # fmt: skip
     cfg = None if config is None else load_localizer_config(config)
 
@@ -93,7 +106,7 @@ def localize(
         wired = _scenario_node(scenario, seed, duration, cfg)
     else:
         assert bag is not None
-        wired = _bag_node(bag, tags, cfg, cameras, topics)
+        wired = _bag_node(bag, tags, cfg, cam, topics)
     if realtime:  # live order: publish each odometry sample before the frames it completes
         node_cfg = wired.node.config
         output = node_cfg.output.model_copy(update={"publish_first": True})
@@ -112,6 +125,8 @@ class WiredNode:
     node: LocalizerNode
     stream: Iterable[tuple[str, Message]]
     name: str
+    #: What the camera check found (before any fix), for summary.json.
+    camera_check: dict[str, object] | None = None
 
 
 def run_node(
@@ -123,10 +138,15 @@ def run_node(
     from tagloc.fileutil import atomic_write_text
     from tagloc.io.node_sinks import RunFilesSink
 
+    from tagloc.localize.extrinsic_check import ExtrinsicRecorder
+
     node = wired.node
     sink = RunFilesSink(out, node.config.frames.map_frame, bag=bag, name=wired.name)
-    node.sinks.append(sink)
+    extrinsics = ExtrinsicRecorder()
+    node.sinks += [sink, extrinsics]
     extra: dict[str, object] = {}
+    if wired.camera_check is not None:
+        extra["camera_check"] = wired.camera_check
     try:
         if realtime is not None:
             from tagloc.localize.realtime import run_realtime
@@ -140,10 +160,14 @@ def run_node(
                 node.feed(topic, msg)
             node.finish()
         _check_frames(node, sink.counts["frames"])
+        check = extrinsics.check(node.T_base_cam)
+        extra["extrinsic_check"] = None if check is None else check.to_dict()
     except BaseException:
         sink.abort()
         raise
     written, lines = sink.close({**node.metadata(), **extra})
+    if check is not None and check.warning:
+        lines.append(f"WARNING: {check.warning}")
     atomic_write_text(out / "localizer.yaml", node.config.to_yaml_text())
     return [*written, out / "localizer.yaml"], lines
 
@@ -178,21 +202,92 @@ def _scenario_node(
     return WiredNode(node, source, f"scenario:{name}")
 
 
+@dataclass(frozen=True, slots=True)
+class BagCamera:
+    """How a bag's camera is described: ``--cameras`` (Kalibr; its first camera),
+    ``--camera-poses`` (``T_body_cam``), ``--tagslam`` (``T_body_odom``: the odometry's child
+    frame in the body) and how the bag lists a tag's corners."""
+
+    cameras: Path | None = None
+    camera_poses: Path | None = None
+    tagslam: Path | None = None
+    corner_order: str = "tl_tr_br_bl"
+
+    def inputs(self) -> dict[str, Path | None]:
+        return {"--cameras": self.cameras, "--camera-poses": self.camera_poses,
+                "--tagslam": self.tagslam}  # fmt: skip
+
+
+def bag_camera(cam: BagCamera) -> tuple[CameraModel | None, SE3 | None]:
+    """The camera model and ``T_base_cam`` the options give (None: from the bag)."""
+    from tagloc.config import read_text_file
+    from tagloc.io import load_kalibr_cameras
+    from tagloc.localize import LocalizeError
+    from tagloc.mapping.stream_survey import parse_camera_poses, parse_tagslam
+
+    if cam.cameras is None:
+        if cam.camera_poses is not None:
+            raise LocalizeError("--camera-poses needs --cameras (which camera it names)")
+        return None, None
+    name, camera = next(iter(load_kalibr_cameras(cam.cameras).items()))
+    if cam.camera_poses is None:
+        return camera, None
+    poses = parse_camera_poses(read_text_file(cam.camera_poses, "camera poses"), str(cam.camera_poses))
+    if name not in poses:
+        raise LocalizeError(f"{cam.camera_poses}: no pose of camera {name!r} (--cameras's first)")
+    T_base_cam = poses[name]
+    if cam.tagslam is not None:
+        rig = parse_tagslam(read_text_file(cam.tagslam, "tagslam configuration"), str(cam.tagslam))
+        if rig.T_body_odom is not None:  # the odometry's child frame is the node's base
+            T_base_cam = rig.T_body_odom.inverse() @ T_base_cam
+    return camera, T_base_cam
+
+
+def check_bag_camera(
+    bag: Path, camera: CameraModel, T_base_cam: SE3 | None, tag_map: TagMap,
+    topics: NodeTopics, corner_order: str, family: str,
+) -> dict[str, object]:  # fmt: skip
+    """Check the camera model against the bag's first frames (before any fix); refuse with one
+    line naming what disagrees."""
+    from tagloc.io import BagSource
+    from tagloc.localize import LocalizeError
+    from tagloc.localize.intrinsic_check import check_camera
+
+    wanted = [topics.odom, topics.detections, topics.camera_info, topics.image]
+    source = BagSource(bag, corner_order=corner_order, default_family=family)
+    wanted += [t for t in source.bag_topics if t.rstrip("/").endswith("tf_static")]
+    source = BagSource(bag, sorted({t for t in wanted if t in source.bag_topics}),
+                       corner_order=corner_order, default_family=family)  # fmt: skip
+    found = check_camera(
+        source, camera, tag_map, detections_topic=topics.detections, odom_topic=topics.odom,
+        T_base_cam=T_base_cam, camera_info_topic=topics.camera_info, image_topic=topics.image,
+        family=family,
+    )  # fmt: skip
+    if found.problems:
+        raise LocalizeError(
+            f"--cameras: the camera model does not fit {bag.name}: {found.problems[0]}; "
+            "refusing before any fix"
+        )
+    return found.to_dict()
+
+
 def _bag_node(
-    bag: Path, tags: Path | None, cfg: LocalizerConfig | None, cameras: Path | None,
+    bag: Path, tags: Path | None, cfg: LocalizerConfig | None, cam: BagCamera,
     topics: tuple[str, ...],
 ) -> WiredNode:  # fmt: skip
-    from tagloc.io import BagSource, load_kalibr_cameras
+    from tagloc.io import BagSource
     from tagloc.localize import LocalizeError
+    from tagloc.localize.config import LocalizerConfig
     from tagloc.localize.node import LocalizerNode, NodeTopics
     from tagloc.tags import load_tag_map
 
     if tags is None:
         raise LocalizeError("a bag needs the tag map: --tags tags.yaml")
     tag_map = load_tag_map(tags)
-    camera = None if cameras is None else next(iter(load_kalibr_cameras(cameras).values()))
+    camera, T_base_cam = bag_camera(cam)
     roles = NodeTopics(*topics)
-    source = BagSource(bag)
+    family = (cfg or LocalizerConfig()).tags.family
+    source = BagSource(bag, corner_order=cam.corner_order, default_family=family)
     if roles.odom not in source.bag_topics and roles.tf not in source.bag_topics:
         raise LocalizeError(
             f"{bag}: no odometry: neither {roles.odom!r} nor {roles.tf!r} is in the bag "
@@ -203,8 +298,13 @@ def _bag_node(
             f"{bag}: no camera frames: neither {roles.detections!r} nor {roles.image!r} is in "
             f"the bag (topics: {', '.join(sorted(source.bag_topics)) or 'none'})"
         )
+    checked = None
+    if camera is not None:
+        checked = check_bag_camera(bag, camera, T_base_cam, tag_map, roles, cam.corner_order,
+                                   family)  # fmt: skip
     wanted = [t for t in topics if t in source.bag_topics]
     wanted += [t for t in source.bag_topics if t.rstrip("/").endswith("tf_static")]
-    source = BagSource(bag, sorted(set(wanted)))
-    node = LocalizerNode(tag_map, cfg, camera=camera, topics=roles)
-    return WiredNode(node, source, bag.name)
+    source = BagSource(bag, sorted(set(wanted)), corner_order=cam.corner_order,
+                       default_family=family)  # fmt: skip
+    node = LocalizerNode(tag_map, cfg, camera=camera, T_base_cam=T_base_cam, topics=roles)
+    return WiredNode(node, source, bag.name, checked)
