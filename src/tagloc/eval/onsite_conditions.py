@@ -91,7 +91,8 @@ def acceptance_by_conditions(
     fixes: Iterable[FixAttempt],
     measures: dict[tuple[int, int], ImageMeasure] | None = None,
 ) -> dict[str, Any]:
-    """Acceptance rates binned by ``distance_m``, ``view_angle_deg`` and, with ``measures``
+    """Acceptance rates binned by ``distance_m``, ``view_angle_deg`` (attempts refused before
+    PnP have no angle: counted in ``view_angle_unknown``, not binned) and, with ``measures``
     (by ``(stamp_ns, tag_id)``; a joint fix takes its first tag's), ``laplacian_var`` and
     ``brightness``. Returns ``{condition: [AcceptanceBin.to_dict(), ...], "note": ...}``."""
     attempts = [f for f in fixes if f.tag_ids]
@@ -100,6 +101,8 @@ def acceptance_by_conditions(
     angle = np.degrees(np.array([f.view_angle_rad for f in attempts], dtype=np.float64))
     out: dict[str, Any] = {
         "attempts": len(attempts), "accepted": int(ok.sum()),
+        # a per-observation gate's refusal carries a range but no viewing angle
+        "view_angle_unknown": int((~np.isfinite(angle)).sum()),
         "distance_m": [b.to_dict() for b in _bins(dist, ok, DISTANCE_EDGES_M)],
         "view_angle_deg": [b.to_dict() for b in _bins(angle, ok, ANGLE_EDGES_DEG)],
     }  # fmt: skip
