@@ -52,8 +52,10 @@ def test_eval_bag_writes_its_report(sim_bag: Path, tmp_path: Path) -> None:
 
 def test_eval_bag_unknown_held_out_tag_is_one_line(sim_bag: Path, tmp_path: Path) -> None:
     out = tmp_path / "eval"
-    done = run_tagloc("eval", "bag", str(sim_bag / "drive.mcap"), "--tags",
-                      str(sim_bag / "tags.yaml"), "--hold-out", "999", "--out", str(out))  # fmt: skip
+    done = run_tagloc(
+        "eval", "bag", str(sim_bag / "drive.mcap"), "--tags", str(sim_bag / "tags.yaml"),
+        "--hold-out", "999", "--out", str(out),
+    )  # fmt: skip
     assert "--hold-out 999: no tag tag36h11:999" in one_error_line(done)
     assert not out.exists()
 

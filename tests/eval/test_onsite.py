@@ -80,7 +80,9 @@ def test_error_stats_match_numpy() -> None:
 
 
 # ----- a hand-built run: odometry with stops, identity correction -------------------------------
-def _run_with_stops(visits: list[tuple[float, float]], noise_m: float, seed: int) -> LocalizationRun:
+def _run_with_stops(
+    visits: list[tuple[float, float]], noise_m: float, seed: int
+) -> LocalizationRun:
     """Drive between the ``visits`` at 1 m/s (100 Hz), standing 3 s at each, with the fused pose
     off by a seeded ``noise_m`` per visit."""
     rng = np.random.default_rng(seed)
@@ -136,15 +138,20 @@ def test_fused_pose_at_odometry_stamps_is_the_run() -> None:
 
 # ----- acceptance by conditions ----------------------------------------------------------------
 def _attempt(stamp: int, tag: int, range_m: float, angle_deg: float, ok: bool) -> FixAttempt:
-    return FixAttempt(stamp, f"tag:{tag}", (tag,), SE3.identity(), np.eye(6),
-                      "accepted" if ok else "gated_chi2", range_m, math.radians(angle_deg))  # fmt: skip
+    decision = "accepted" if ok else "gated_chi2"
+    return FixAttempt(
+        stamp, f"tag:{tag}", (tag,), SE3.identity(), np.eye(6), decision, range_m,
+        math.radians(angle_deg),
+    )  # fmt: skip
 
 
 def test_acceptance_bins_count_the_attempts() -> None:
     rng = np.random.default_rng(3)
     ranges, angles = rng.uniform(0.5, 7.5, 300), rng.uniform(0.0, 80.0, 300)
     ok = ranges < 3.0 + rng.normal(0, 0.5, 300)
-    fixes = [_attempt(i, 1, r, a, o) for i, (r, a, o) in enumerate(zip(ranges, angles, ok))]
+    fixes = [
+        _attempt(i, 1, r, a, o) for i, (r, a, o) in enumerate(zip(ranges, angles, ok, strict=True))
+    ]
     out = acceptance_by_conditions(fixes)
     assert out["attempts"] == 300 and out["accepted"] == int(ok.sum()) and out["note"] == NO_IMAGES
     for b in out["distance_m"]:

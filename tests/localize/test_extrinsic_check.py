@@ -19,10 +19,13 @@ S_NS = 1_000_000_000
 # optical frame 0.25 m ahead, 0.5 m up, pitched 5 deg up (x right, y down, z forward)
 _R = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 _PITCH = SE3.from_rotvec([0.0, -math.radians(5.0), 0.0], [0.0, 0.0, 0.0])
-T_BASE_CAM_TRUE = SE3.from_matrix(np.block([[_R, np.array([[0.25], [0.0], [0.5]])],
-                                            [np.zeros((1, 3)), np.ones((1, 1))]]))
-T_BASE_CAM_TRUE = SE3.from_rotvec([0.0, 0.0, 0.0], [0.25, 0.0, 0.5]) @ _PITCH @ SE3.from_matrix(
-    np.block([[_R, np.zeros((3, 1))], [np.zeros((1, 3)), np.ones((1, 1))]])
+T_BASE_CAM_TRUE = SE3.from_matrix(
+    np.block([[_R, np.array([[0.25], [0.0], [0.5]])], [np.zeros((1, 3)), np.ones((1, 1))]])
+)
+T_BASE_CAM_TRUE = (
+    SE3.from_rotvec([0.0, 0.0, 0.0], [0.25, 0.0, 0.5])
+    @ _PITCH
+    @ SE3.from_matrix(np.block([[_R, np.zeros((3, 1))], [np.zeros((1, 3)), np.ones((1, 1))]]))
 )
 # 1 deg about the camera's (vertical) y axis, 3 cm to the camera's right
 MISSET = np.array([0.03, 0.0, 0.0, 0.0, math.radians(1.0), 0.0])
@@ -51,7 +54,9 @@ def _planar_drive(seed: int, n: int = 3000) -> tuple[np.ndarray, SE3, SE3]:
     return (t * S_NS).astype(np.int64), T_map_base, T_map_base
 
 
-def _fixes(stamps: np.ndarray, T_map_base: SE3, T_base_cam_used: SE3, seed: int) -> list[FixAttempt]:
+def _fixes(
+    stamps: np.ndarray, T_map_base: SE3, T_base_cam_used: SE3, seed: int
+) -> list[FixAttempt]:
     """Fixes at 10 Hz as the node forms them: the (noisy) true camera pose, expressed as
     ``T_map_base`` through the extrinsics the node was given."""
     rng = np.random.default_rng(seed)
@@ -61,8 +66,16 @@ def _fixes(stamps: np.ndarray, T_map_base: SE3, T_base_cam_used: SE3, seed: int)
     for k in range(0, len(stamps), 10):
         T_map_cam = T_map_base[k] @ T_BASE_CAM_TRUE @ SE3.exp(rng.normal(0.0, sig))
         out.append(
-            FixAttempt(int(stamps[k]), "tag:1", (1,), T_map_cam @ T_base_cam_used.inverse(), cov,
-                       "accepted", 2.0, 0.3)  # fmt: skip
+            FixAttempt(
+                int(stamps[k]),
+                "tag:1",
+                (1,),
+                T_map_cam @ T_base_cam_used.inverse(),
+                cov,
+                "accepted",
+                2.0,
+                0.3,
+            )
         )
     return out
 

@@ -121,8 +121,9 @@ def eval_bag(
     probe = BagSource(bag, corner_order=corner_order, default_family=family)
     present = probe.bag_topics
     if odom_topic not in present and tf_topic not in present:
+        topics_text = ", ".join(sorted(present)) or "none"
         raise LocalizeError(f"{bag}: no odometry: neither {odom_topic!r} nor {tf_topic!r} is in "
-                            f"the bag (topics: {', '.join(sorted(present)) or 'none'})")  # fmt: skip
+                            f"the bag (topics: {topics_text})")  # fmt: skip
     if detections_topic not in present and image_topic not in present:
         raise LocalizeError(f"{bag}: no camera frames: neither {detections_topic!r} nor "
                             f"{image_topic!r} is in the bag")  # fmt: skip

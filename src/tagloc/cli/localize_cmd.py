@@ -137,7 +137,6 @@ def run_node(
     ``realtime``: pace by the wall clock at this speed, detection on a worker thread."""
     from tagloc.fileutil import atomic_write_text
     from tagloc.io.node_sinks import RunFilesSink
-
     from tagloc.localize.extrinsic_check import ExtrinsicRecorder
 
     node = wired.node
@@ -232,7 +231,9 @@ def bag_camera(cam: BagCamera) -> tuple[CameraModel | None, SE3 | None]:
     name, camera = next(iter(load_kalibr_cameras(cam.cameras).items()))
     if cam.camera_poses is None:
         return camera, None
-    poses = parse_camera_poses(read_text_file(cam.camera_poses, "camera poses"), str(cam.camera_poses))
+    poses = parse_camera_poses(
+        read_text_file(cam.camera_poses, "camera poses"), str(cam.camera_poses)
+    )
     if name not in poses:
         raise LocalizeError(f"{cam.camera_poses}: no pose of camera {name!r} (--cameras's first)")
     T_base_cam = poses[name]

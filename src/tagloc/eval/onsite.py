@@ -70,9 +70,7 @@ def error_stats(values: npt.ArrayLike) -> ErrorStats:
     v = v[np.isfinite(v)]
     if v.size == 0:
         return ErrorStats(0, math.nan, math.nan, math.nan)
-    return ErrorStats(
-        int(v.size), float(np.median(v)), float(np.percentile(v, 95)), float(v.max())
-    )
+    return ErrorStats(int(v.size), float(np.median(v)), float(np.percentile(v, 95)), float(v.max()))
 
 
 @dataclass(frozen=True, slots=True)
@@ -142,7 +140,9 @@ class HeldOutResult:
         }
 
 
-def fused_pose_at(run: LocalizationRun, stamps_ns: npt.ArrayLike) -> tuple[SE3, npt.NDArray[np.bool_]]:
+def fused_pose_at(
+    run: LocalizationRun, stamps_ns: npt.ArrayLike
+) -> tuple[SE3, npt.NDArray[np.bool_]]:
     """The run's fused ``T_map_base`` at ``stamps_ns``: the odometry interpolated between its
     samples, composed with the correction published at the sample before (as a consumer of
     ``map -> odom`` would). Second value: where it is defined (inside the run, initialized)."""
@@ -192,7 +192,9 @@ class _Tap:
     def __call__(self, stream: Iterable[tuple[str, Message]]) -> Iterable[tuple[str, Message]]:
         for topic, msg in stream:
             if topic == self.topic and isinstance(msg, TagDetectionsMsg):
-                self.seen.extend(observations_of_tag([(topic, msg)], topic, self.tag_id, self.family))
+                self.seen.extend(
+                    observations_of_tag([(topic, msg)], topic, self.tag_id, self.family)
+                )
             yield topic, msg
 
 
@@ -288,7 +290,9 @@ def _views(
         # of the two IPPE branches, the one nearer the map's orientation (the localizer's own
         # disambiguation with a prior); the position barely depends on the branch
         T_cam_tag, cov = est.T_cam_tag, est.cov_cam_tag
-        if _angle(T_map_cam @ est.T_cam_tag_alt, T_map_tag) < _angle(T_map_cam @ T_cam_tag, T_map_tag):
+        if _angle(T_map_cam @ est.T_cam_tag_alt, T_map_tag) < _angle(
+            T_map_cam @ T_cam_tag, T_map_tag
+        ):
             T_cam_tag, cov = est.T_cam_tag_alt, est.cov_cam_tag_alt
         T_map_tag_pred = T_map_cam @ T_cam_tag
         normal = T_map_tag_pred.rotation.matrix[:, 2]
@@ -298,7 +302,9 @@ def _views(
             base_err = float(np.linalg.norm(T_map_base[i].translation - truth[i].translation))
             T_base_tag_true = truth[i].inverse() @ T_map_tag
             tag_true = float(
-                np.linalg.norm((T_map_base[i] @ T_base_tag_true).translation - T_map_tag.translation)
+                np.linalg.norm(
+                    (T_map_base[i] @ T_base_tag_true).translation - T_map_tag.translation
+                )
             )
         out.append(
             HeldOutObservation(

@@ -27,8 +27,8 @@ from tagloc.config import StrictModel, parse_yaml_mapping, validate
 from tagloc.localize.run import LocalizationRun
 
 __all__ = [
-    "CheckpointSpread",
     "CheckpointSpec",
+    "CheckpointSpread",
     "CheckpointsFile",
     "Stop",
     "checkpoint_spreads",
@@ -144,9 +144,9 @@ def checkpoint_spreads(
     else:
         means: list[npt.NDArray[np.float64]] = []
         for s in stops:
-            d = [float(np.hypot(m[0] - s.x, m[1] - s.y)) for m in means]
-            k = int(np.argmin(d)) if d else -1
-            if k < 0 or d[k] > cluster_radius_m:
+            dist = [float(np.hypot(m[0] - s.x, m[1] - s.y)) for m in means]
+            k = int(np.argmin(dist)) if dist else -1
+            if k < 0 or dist[k] > cluster_radius_m:
                 means.append(np.array([s.x, s.y]))
                 k = len(means) - 1
             name = f"stop_{k + 1}"

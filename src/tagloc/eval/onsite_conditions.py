@@ -11,6 +11,7 @@ of pre-detected corners has no images: those two conditions are then absent and 
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -81,7 +82,7 @@ def _bins(values: npt.NDArray[np.float64], ok: npt.NDArray[np.bool_],
           edges: Sequence[float]) -> list[AcceptanceBin]:  # fmt: skip
     out = []
     finite = np.isfinite(values)
-    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+    for lo, hi in itertools.pairwise(edges):
         m = finite & (values >= lo) & (values < hi)
         out.append(AcceptanceBin(float(lo), float(hi), int(m.sum()), int((m & ok).sum())))
     return out

@@ -77,8 +77,10 @@ def summary_lines(summary: dict[str, Any]) -> list[str]:
             f"{_f(c['max_m'], 100)} cm, yaw std {_f(c['yaw_std_deg'], 1, 2)} deg"
         )
     acc = summary["acceptance"]
-    lines.append(f"fix acceptance: {acc['accepted']} of {acc['attempts']} ({acc['note']}; "
-                 f"{acc['view_angle_unknown']} refused before PnP have no viewing angle)")
+    lines.append(
+        f"fix acceptance: {acc['accepted']} of {acc['attempts']} ({acc['note']}; "
+        f"{acc['view_angle_unknown']} refused before PnP have no viewing angle)"
+    )
     for key, unit in (("distance_m", "m"), ("view_angle_deg", "deg"),
                       ("laplacian_var", "lap.var"), ("brightness", "grey")):  # fmt: skip
         bins = [b for b in acc.get(key, []) if b["attempts"]]

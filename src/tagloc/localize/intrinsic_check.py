@@ -28,6 +28,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tagloc.camera import CameraModel, from_camera_info
+from tagloc.errors import TaglocError
 from tagloc.geometry import SE3
 from tagloc.messages import (
     CameraInfoMsg,
@@ -37,7 +38,6 @@ from tagloc.messages import (
     TagDetectionsMsg,
     TransformMsg,
 )
-from tagloc.errors import TaglocError
 from tagloc.tags import TagEntry, TagMap
 from tagloc.tags.pnp import estimate_tag_poses
 
