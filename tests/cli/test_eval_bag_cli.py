@@ -96,3 +96,14 @@ def test_dupont_camera_passes_the_check(tmp_path: Path) -> None:
     assert done.returncode == 0, done.stderr
     check = json.loads((out / "summary.json").read_text())["camera_check"]
     assert check["problems"] == [] and check["n_pairs"] >= 5 and abs(check["pnp_scale"] - 1) < 0.1
+
+
+def test_eval_bag_checks_its_output_before_any_work(sim_bag: Path, tmp_path: Path) -> None:
+    taken = tmp_path / "a_file"
+    taken.write_text("keep me\n")
+    done = run_tagloc(
+        "eval", "bag", str(sim_bag / "drive.mcap"), "--tags", str(sim_bag / "tags.yaml"),
+        "--out", str(taken),
+    )  # fmt: skip
+    assert "--out" in one_error_line(done)
+    assert taken.read_text() == "keep me\n"
