@@ -85,7 +85,7 @@ def eval_bag(
     repeatability, fix acceptance by conditions, the camera's extrinsics."""
     from rich.progress import Progress
 
-    from tagloc.cli.localize_cmd import BagCamera, bag_camera, check_bag_camera
+    from tagloc.cli.bag_camera import BagCamera, bag_camera, check_bag_camera
     from tagloc.config import read_text_file
     from tagloc.eval.onsite import held_out_tags
     from tagloc.eval.onsite_checkpoints import checkpoint_spreads, detect_stops, parse_checkpoints

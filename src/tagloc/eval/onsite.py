@@ -11,8 +11,8 @@ transported to the tag (the base's error plus the heading error times the range)
 error of one observation; near tags, where a robot docks or passes a door, that is the error
 that matters. Each tag in turn (or a chosen subset) gives per-tag and overall statistics.
 
-:func:`fused_pose_at` (the recorded run's ``T_map_base`` at any stamp) is shared with the
-checkpoint and extrinsic checks.
+:func:`~tagloc.eval.onsite_stats.fused_pose_at` (the recorded run's ``T_map_base`` at any stamp)
+and the error statistics live in :mod:`tagloc.eval.onsite_stats`.
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tagloc.camera import CameraModel
+from tagloc.eval.onsite_stats import ErrorStats, error_stats, fused_pose_at, truth_pose_at
 from tagloc.geometry import SE3
 from tagloc.localize.config import LocalizerConfig
 from tagloc.localize.node import NodeTopics
@@ -49,28 +50,6 @@ __all__ = [
 FloatArray = npt.NDArray[np.float64]
 #: A stream that can be iterated more than once (a bag source, a scenario source, a list).
 StreamFactory = Callable[[], Iterable[tuple[str, Message]]]
-
-
-@dataclass(frozen=True, slots=True)
-class ErrorStats:
-    """Median, 95th percentile and max of a set of errors (NaN when empty)."""
-
-    n: int
-    median: float
-    p95: float
-    max: float
-
-    def to_dict(self) -> dict[str, float | int]:
-        return {"n": self.n, "median": self.median, "p95": self.p95, "max": self.max}
-
-
-def error_stats(values: npt.ArrayLike) -> ErrorStats:
-    """:class:`ErrorStats` of the finite ``values``."""
-    v = np.asarray(values, dtype=np.float64).ravel()
-    v = v[np.isfinite(v)]
-    if v.size == 0:
-        return ErrorStats(0, math.nan, math.nan, math.nan)
-    return ErrorStats(int(v.size), float(np.median(v)), float(np.percentile(v, 95)), float(v.max()))
 
 
 @dataclass(frozen=True, slots=True)
@@ -138,35 +117,6 @@ class HeldOutResult:
             "per_tag": {str(i): pack(self.stats(i)) for i in self.tag_ids()},
             "unseen_tags": list(self.unseen),
         }
-
-
-def fused_pose_at(
-    run: LocalizationRun, stamps_ns: npt.ArrayLike
-) -> tuple[SE3, npt.NDArray[np.bool_]]:
-    """The run's fused ``T_map_base`` at ``stamps_ns``: the odometry interpolated between its
-    samples, composed with the correction published at the sample before (as a consumer of
-    ``map -> odom`` would). Second value: where it is defined (inside the run, initialized)."""
-    stamps = np.asarray(stamps_ns, dtype=np.int64).reshape(-1)
-    s = run.stamps_ns
-    i = np.clip(np.searchsorted(s, stamps, side="right") - 1, 0, len(s) - 1)
-    j = np.minimum(i + 1, len(s) - 1)
-    span = np.maximum(s[j] - s[i], 1)
-    alpha = np.clip((stamps - s[i]) / span, 0.0, 1.0)
-    T_odom_base = run.T_odom_base[i].interpolate_rt(run.T_odom_base[j], alpha)
-    valid = (stamps >= s[0]) & (stamps <= s[-1]) & run.initialized[i]
-    return run.T_map_odom[i] @ T_odom_base, valid
-
-
-def truth_pose_at(run: LocalizationRun, stamps_ns: npt.ArrayLike) -> SE3 | None:
-    """Ground truth ``T_map_base`` interpolated at ``stamps_ns`` (None without truth)."""
-    if run.T_map_base_truth is None:
-        return None
-    stamps = np.asarray(stamps_ns, dtype=np.int64).reshape(-1)
-    s = run.stamps_ns
-    i = np.clip(np.searchsorted(s, stamps, side="right") - 1, 0, len(s) - 1)
-    j = np.minimum(i + 1, len(s) - 1)
-    alpha = np.clip((stamps - s[i]) / np.maximum(s[j] - s[i], 1), 0.0, 1.0)
-    return run.T_map_base_truth[i].interpolate_rt(run.T_map_base_truth[j], alpha)
 
 
 def observations_of_tag(
