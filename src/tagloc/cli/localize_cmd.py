@@ -22,6 +22,7 @@ from tagloc.cli.options import duration_range, in_range, seed_range
 from tagloc.fileutil import check_outputs
 
 if TYPE_CHECKING:
+    from tagloc.cli.bag_camera import BagCamera
     from tagloc.localize.config import LocalizerConfig
     from tagloc.localize.node import LocalizerNode
     from tagloc.messages import Message
@@ -57,6 +58,15 @@ def localize(
     out: Annotated[Path, typer.Option(help="Output directory.")] = Path("out/localize"),
     config: Annotated[Path | None, typer.Option(help="localizer.yaml.")] = None,
     cameras: Annotated[Path | None, typer.Option(help="Kalibr camchain yaml.")] = None,
+    camera_poses: Annotated[
+        Path | None, typer.Option(help="camera_poses.yaml: T_body_cam (with --cameras).")
+    ] = None,
+    tagslam: Annotated[
+        Path | None, typer.Option(help="tagslam.yaml: T_body_odom (odometry child in body).")
+    ] = None,
+    corner_order: Annotated[
+        str, typer.Option(help="How the bag lists corners, e.g. bl_br_tr_tl.")
+    ] = "tl_tr_br_bl",
     odom_topic: Annotated[str, typer.Option(help="Odometry.")] = "/odom",
     detections_topic: Annotated[str, typer.Option(help="Tag corners.")] = "/tag_detections",
     image_topic: Annotated[str, typer.Option(help="Images.")] = "/camera/image",
@@ -82,9 +92,12 @@ def localize(
 
     if (bag is None) == (scenario is None):
         raise LocalizeError("give exactly one input: a bag path or --scenario NAME")
+    from tagloc.cli.bag_camera import BagCamera
+
+    cam = BagCamera(cameras, camera_poses, tagslam, corner_order)
     check_outputs(
         {"--out": out}, directories={"--out": OUTPUT_FILES},
-        inputs={"BAG": bag, "--tags": tags, "--config": config, "--cameras": cameras},
+        inputs={"BAG": bag, "--tags": tags, "--config": config, **cam.inputs()},
     )  # fmt: skip
     cfg = None if config is None else load_localizer_config(config)
 
@@ -93,7 +106,7 @@ def localize(
         wired = _scenario_node(scenario, seed, duration, cfg)
     else:
         assert bag is not None
-        wired = _bag_node(bag, tags, cfg, cameras, topics)
+        wired = _bag_node(bag, tags, cfg, cam, topics)
     if realtime:  # live order: publish each odometry sample before the frames it completes
         node_cfg = wired.node.config
         output = node_cfg.output.model_copy(update={"publish_first": True})
@@ -112,6 +125,8 @@ class WiredNode:
     node: LocalizerNode
     stream: Iterable[tuple[str, Message]]
     name: str
+    #: What the camera check found (before any fix), for summary.json.
+    camera_check: dict[str, object] | None = None
 
 
 def run_node(
@@ -122,11 +137,15 @@ def run_node(
     ``realtime``: pace by the wall clock at this speed, detection on a worker thread."""
     from tagloc.fileutil import atomic_write_text
     from tagloc.io.node_sinks import RunFilesSink
+    from tagloc.localize.extrinsic_check import ExtrinsicRecorder
 
     node = wired.node
     sink = RunFilesSink(out, node.config.frames.map_frame, bag=bag, name=wired.name)
-    node.sinks.append(sink)
+    extrinsics = ExtrinsicRecorder()
+    node.sinks += [sink, extrinsics]
     extra: dict[str, object] = {}
+    if wired.camera_check is not None:
+        extra["camera_check"] = wired.camera_check
     try:
         if realtime is not None:
             from tagloc.localize.realtime import run_realtime
@@ -140,10 +159,14 @@ def run_node(
                 node.feed(topic, msg)
             node.finish()
         _check_frames(node, sink.counts["frames"])
+        check = extrinsics.check(node.T_base_cam)
+        extra["extrinsic_check"] = None if check is None else check.to_dict()
     except BaseException:
         sink.abort()
         raise
     written, lines = sink.close({**node.metadata(), **extra})
+    if check is not None and check.warning:
+        lines.append(f"WARNING: {check.warning}")
     atomic_write_text(out / "localizer.yaml", node.config.to_yaml_text())
     return [*written, out / "localizer.yaml"], lines
 
@@ -179,20 +202,23 @@ def _scenario_node(
 
 
 def _bag_node(
-    bag: Path, tags: Path | None, cfg: LocalizerConfig | None, cameras: Path | None,
+    bag: Path, tags: Path | None, cfg: LocalizerConfig | None, cam: BagCamera,
     topics: tuple[str, ...],
 ) -> WiredNode:  # fmt: skip
-    from tagloc.io import BagSource, load_kalibr_cameras
+    from tagloc.cli.bag_camera import bag_camera, check_bag_camera
+    from tagloc.io import BagSource
     from tagloc.localize import LocalizeError
+    from tagloc.localize.config import LocalizerConfig
     from tagloc.localize.node import LocalizerNode, NodeTopics
     from tagloc.tags import load_tag_map
 
     if tags is None:
         raise LocalizeError("a bag needs the tag map: --tags tags.yaml")
     tag_map = load_tag_map(tags)
-    camera = None if cameras is None else next(iter(load_kalibr_cameras(cameras).values()))
+    camera, T_base_cam = bag_camera(cam)
     roles = NodeTopics(*topics)
-    source = BagSource(bag)
+    family = (cfg or LocalizerConfig()).tags.family
+    source = BagSource(bag, corner_order=cam.corner_order, default_family=family)
     if roles.odom not in source.bag_topics and roles.tf not in source.bag_topics:
         raise LocalizeError(
             f"{bag}: no odometry: neither {roles.odom!r} nor {roles.tf!r} is in the bag "
@@ -203,8 +229,13 @@ def _bag_node(
             f"{bag}: no camera frames: neither {roles.detections!r} nor {roles.image!r} is in "
             f"the bag (topics: {', '.join(sorted(source.bag_topics)) or 'none'})"
         )
+    checked = None
+    if camera is not None:
+        checked = check_bag_camera(bag, camera, T_base_cam, tag_map, roles, cam.corner_order,
+                                   family)  # fmt: skip
     wanted = [t for t in topics if t in source.bag_topics]
     wanted += [t for t in source.bag_topics if t.rstrip("/").endswith("tf_static")]
-    source = BagSource(bag, sorted(set(wanted)))
-    node = LocalizerNode(tag_map, cfg, camera=camera, topics=roles)
-    return WiredNode(node, source, bag.name)
+    source = BagSource(bag, sorted(set(wanted)), corner_order=cam.corner_order,
+                       default_family=family)  # fmt: skip
+    node = LocalizerNode(tag_map, cfg, camera=camera, T_base_cam=T_base_cam, topics=roles)
+    return WiredNode(node, source, bag.name, checked)

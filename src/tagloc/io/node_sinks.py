@@ -149,8 +149,9 @@ class RunFilesSink:
             "suspect_sources": metadata.get("suspect_sources"),
             "odometry_calibration": metadata.get("odometry_calibration"),
         }  # fmt: skip
-        if "realtime" in metadata:
-            out["realtime"] = metadata["realtime"]
+        for key in ("realtime", "extrinsic_check", "camera_check"):
+            if key in metadata:
+                out[key] = metadata[key]
         if self._n_truth:
             out["ate_unaligned_m"] = {k: math.sqrt(v / self._n_truth) for k, v in self._sq.items()}
         return out
@@ -172,6 +173,13 @@ class RunFilesSink:
             lines.append(
                 f"ATE RMSE (unaligned): fused {ate['fused']:.3f} m, odometry only "
                 f"{ate['odometry']:.3f} m"
+            )
+        ext = s.get("extrinsic_check")
+        if ext:
+            lines.append(
+                f"extrinsic check: camera mounting off by {ext['rotation_deg']:.2f} deg / "
+                f"{ext['translation_m'] * 100:.1f} cm ({ext['n_pairs']} fix pairs; unobservable: "
+                f"{', '.join(ext['unobservable']) or 'none'})"
             )
         return lines
 

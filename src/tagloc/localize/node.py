@@ -166,6 +166,19 @@ class LocalizerNode(CameraFrames):
         #: worker threads (an attribute assignment is atomic).
         self.latest_T_map_odom: SE3 | None = None
 
+    @property
+    def camera(self) -> CameraModel | None:
+        """The camera model in use (given, or from the first ``CameraInfoMsg``; None yet)."""
+        return self._camera
+
+    @property
+    def T_base_cam(self) -> SE3 | None:
+        """The extrinsics in use (given, or the stream's static transform once a frame needed
+        it; None yet)."""
+        if self._T_base_cam is not None:
+            return self._T_base_cam
+        return None if self._source is None else self._source.T_base_cam
+
     # ----- input -----------------------------------------------------------------------------
     def feed(self, topic: str, msg: Message) -> None:
         """Consume one stream item (other topics and record types are ignored)."""

@@ -1,0 +1,181 @@
+"""``tagloc eval bag``: evaluate localization on site, from a bag without ground truth.
+
+``tagloc eval bag BAG --tags tags.yaml [camera and topic options of tagloc localize]
+[--checkpoints checkpoints.yaml] [--hold-out ID ...] --out DIR`` localizes the bag once
+(acceptance by conditions, checkpoint repeatability, the extrinsic check), then once per
+held-out tag (:mod:`tagloc.eval.onsite`), and writes ``summary.json``, ``summary.txt`` and
+``report.html`` into ``--out`` (all or none, outputs checked before any work).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated
+
+import typer
+
+from tagloc.cli.eval_cmd import eval_app
+from tagloc.cli.options import in_range
+
+if TYPE_CHECKING:
+    from tagloc.eval.onsite_conditions import ImageMeasure
+    from tagloc.messages import Message
+    from tagloc.tags import TagDetector
+
+
+class _ImageTap:
+    """Passes the stream through; measures blur and brightness of each image's tags."""
+
+    def __init__(self, topic: str, detector: TagDetector | None) -> None:
+        self.topic, self.detector = topic, detector
+        self.measures: dict[tuple[int, int], ImageMeasure] = {}
+        self.images = 0
+
+    def __call__(self, stream: Iterable[tuple[str, Message]]) -> Iterator[tuple[str, Message]]:
+        from tagloc.eval.onsite_conditions import image_measures
+        from tagloc.messages import ImageMsg
+
+        for topic, msg in stream:
+            if topic == self.topic and isinstance(msg, ImageMsg) and self.detector is not None:
+                self.images += 1
+                dets = self.detector.detect(msg.image)
+                for tag_id, m in image_measures(msg.image, dets).items():
+                    self.measures[msg.stamp_ns, tag_id] = m
+            yield topic, msg
+
+
+@eval_app.command("bag")
+def eval_bag(
+    bag: Annotated[Path, typer.Argument(help="Input bag / MCAP.")],
+    tags: Annotated[Path, typer.Option(help="Surveyed tag map.")],
+    out: Annotated[Path, typer.Option(help="Output directory.")] = Path("out/eval_bag"),
+    config: Annotated[Path | None, typer.Option(help="localizer.yaml.")] = None,
+    cameras: Annotated[Path | None, typer.Option(help="Kalibr camchain yaml.")] = None,
+    camera_poses: Annotated[
+        Path | None, typer.Option(help="camera_poses.yaml: T_body_cam (with --cameras).")
+    ] = None,
+    tagslam: Annotated[
+        Path | None, typer.Option(help="tagslam.yaml: T_body_odom (odometry child in body).")
+    ] = None,
+    corner_order: Annotated[str, typer.Option(help="How the bag lists corners.")] = "tl_tr_br_bl",
+    odom_topic: Annotated[str, typer.Option(help="Odometry.")] = "/odom",
+    detections_topic: Annotated[str, typer.Option(help="Tag corners.")] = "/tag_detections",
+    image_topic: Annotated[str, typer.Option(help="Images.")] = "/camera/image",
+    camera_info_topic: Annotated[str, typer.Option(help="CameraInfo.")] = "/camera/camera_info",
+    tf_topic: Annotated[str, typer.Option(help="Odometry as /tf (odom -> base).")] = "/tf",
+    checkpoints: Annotated[
+        Path | None, typer.Option(help="checkpoints.yaml (name, x, y, radius); default: stops.")
+    ] = None,
+    hold_out: Annotated[
+        list[int], typer.Option(help="Tag id to hold out (repeat; default: every tag).",
+                                callback=in_range(ge=0))
+    ] = [],  # noqa: B006
+    no_hold_out: Annotated[
+        bool, typer.Option("--no-hold-out", help="Skip the held-out-tag runs.")
+    ] = False,
+    max_range: Annotated[
+        float, typer.Option(help="Held-out views up to this range, m.", callback=in_range(gt=0))
+    ] = 4.0,
+    min_stop: Annotated[
+        float, typer.Option(help="A stop: still for this long, s.", callback=in_range(gt=0))
+    ] = 2.0,
+) -> None:  # fmt: skip
+    """Evaluate localization on a bag without ground truth: held-out tags, checkpoint
+    repeatability, fix acceptance by conditions, the camera's extrinsics."""
+    from rich.progress import Progress
+
+    from tagloc.cli.bag_camera import BagCamera, bag_camera, check_bag_camera
+    from tagloc.config import read_text_file
+    from tagloc.eval.onsite import held_out_tags
+    from tagloc.eval.onsite_checkpoints import checkpoint_spreads, detect_stops, parse_checkpoints
+    from tagloc.eval.onsite_conditions import acceptance_by_conditions
+    from tagloc.eval.onsite_report import ONSITE_FILES, onsite_summary, write_onsite_report
+    from tagloc.fileutil import check_outputs
+    from tagloc.io import BagSource
+    from tagloc.localize import LocalizeError, load_localizer_config
+    from tagloc.localize.config import LocalizerConfig
+    from tagloc.localize.extrinsic_check import check_run_extrinsics
+    from tagloc.localize.node import NodeTopics
+    from tagloc.localize.pipeline import LocalizationPipeline
+    from tagloc.tags import load_tag_map, make_detector
+
+    cam = BagCamera(cameras, camera_poses, tagslam, corner_order)
+    check_outputs(
+        {"--out": out}, directories={"--out": ONSITE_FILES},
+        inputs={"BAG": bag, "--tags": tags, "--config": config, "--checkpoints": checkpoints,
+                **cam.inputs()},
+    )  # fmt: skip
+    cfg = load_localizer_config(config) if config is not None else LocalizerConfig()
+    tag_map = load_tag_map(tags)
+    spots = None
+    if checkpoints is not None:
+        spots = parse_checkpoints(read_text_file(checkpoints, "checkpoints"), str(checkpoints))
+    family = cfg.tags.family
+    unknown = [i for i in hold_out if tag_map.get(i, family) is None]
+    if unknown:
+        raise LocalizeError(f"--hold-out {unknown[0]}: no tag {family}:{unknown[0]} in {tags}")
+    topics = NodeTopics(odom_topic, detections_topic, image_topic, camera_info_topic,
+                        "/ground_truth", tf_topic)  # fmt: skip
+    camera, T_base_cam = bag_camera(cam)
+    probe = BagSource(bag, corner_order=corner_order, default_family=family)
+    present = probe.bag_topics
+    if odom_topic not in present and tf_topic not in present:
+        topics_text = ", ".join(sorted(present)) or "none"
+        raise LocalizeError(f"{bag}: no odometry: neither {odom_topic!r} nor {tf_topic!r} is in "
+                            f"the bag (topics: {topics_text})")  # fmt: skip
+    if detections_topic not in present and image_topic not in present:
+        raise LocalizeError(f"{bag}: no camera frames: neither {detections_topic!r} nor "
+                            f"{image_topic!r} is in the bag")  # fmt: skip
+    camera_check = None
+    if camera is not None:
+        camera_check = check_bag_camera(bag, camera, T_base_cam, tag_map, topics, corner_order,
+                                        family)  # fmt: skip
+    wanted = [t for t in (odom_topic, detections_topic, image_topic, camera_info_topic, tf_topic)
+              if t in present]  # fmt: skip
+    wanted += [t for t in present if t.rstrip("/").endswith("tf_static")]
+    wanted = sorted(set(wanted))
+
+    def stream() -> BagSource:
+        return BagSource(bag, wanted, corner_order=corner_order, default_family=family)
+
+    has_images = image_topic in present
+    tap = _ImageTap(image_topic, make_detector(cfg.tags.backend, family) if has_images else None)
+    pipeline = LocalizationPipeline(tag_map, cfg, camera=camera, T_base_cam=T_base_cam,
+                                    topics=topics, name=bag.name)  # fmt: skip
+    run = pipeline.run(tap(stream()))
+    X = pipeline.node.T_base_cam
+    ext = None if X is None else check_run_extrinsics(run, X)
+    stops = detect_stops(run, min_stop_s=min_stop)
+    spreads = checkpoint_spreads(stops, spots)
+    acceptance = acceptance_by_conditions(run.fixes, tap.measures if tap.images else None)
+    held = None
+    if not no_hold_out:
+        ids = hold_out or list(tag_map.ids(family))
+        with Progress(transient=True) as bar:
+            task = bar.add_task("held-out tags", total=len(ids))
+
+            def progress(k: int, n: int, tag_id: int) -> None:
+                bar.update(task, completed=k, description=f"holding out tag {tag_id}")
+
+            held = held_out_tags(
+                stream, tag_map, cfg, tag_ids=ids, camera=camera, T_base_cam=T_base_cam,
+                topics=topics, family=family, max_range_m=max_range, progress=progress,
+            )  # fmt: skip
+    facts = {
+        "odometry_samples": len(run.stamps_ns), "camera_frames": len(run.frames),
+        "fixes_accepted": sum(f.accepted for f in run.fixes), "fix_attempts": len(run.fixes),
+        "images_measured": tap.images,
+    }  # fmt: skip
+    summary = onsite_summary(
+        bag.name, held, stops, spreads, acceptance,
+        checkpoints_from=str(checkpoints) if checkpoints else f"stops >= {min_stop:g} s",
+        extrinsic_check=None if ext is None else ext.to_dict(), camera_check=camera_check,
+        run_facts=facts,
+    )  # fmt: skip
+    write_onsite_report(summary, held, stops, out)
+    from tagloc.eval.onsite_report import summary_lines
+
+    for line in summary_lines(summary):
+        typer.echo(line)
+    typer.echo(f"wrote {', '.join(ONSITE_FILES)} to {out}")

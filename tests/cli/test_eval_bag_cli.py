@@ -1,0 +1,109 @@
+"""``tagloc eval bag`` and the camera checks of ``tagloc localize``, as a user runs them."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from cli_runner import one_error_line, run_tagloc
+
+DUPONT = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "dupont"
+KALIBR = """cam0:
+  camera_model: pinhole
+  intrinsics: [{f}, {f}, 639.5, 359.5]
+  distortion_model: radtan
+  distortion_coeffs: [0.0, 0.0, 0.0, 0.0]
+  resolution: [1280, 720]
+"""
+
+
+@pytest.fixture(scope="module")
+def sim_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 25 s simulated drive as MCAP, its tags.yaml beside it, and camera files: the right
+    one (the simulator's camera) and one with the focal length halved."""
+    d = tmp_path_factory.mktemp("bag")
+    done = run_tagloc("sim", "record", "--out", str(d / "drive.mcap"), "--duration", "25")
+    assert done.returncode == 0, done.stderr
+    (d / "right.yaml").write_text(KALIBR.format(f=640.0))
+    (d / "half.yaml").write_text(KALIBR.format(f=320.0))
+    return d
+
+
+def test_eval_bag_writes_its_report(sim_bag: Path, tmp_path: Path) -> None:
+    out = tmp_path / "eval"
+    (tmp_path / "cp.yaml").write_text("checkpoints:\n  - {name: start, x: 2.0, y: 10.25}\n")
+    done = run_tagloc(
+        "eval", "bag", str(sim_bag / "drive.mcap"), "--tags", str(sim_bag / "tags.yaml"),
+        "--cameras", str(sim_bag / "right.yaml"), "--hold-out", "13", "--checkpoints",
+        str(tmp_path / "cp.yaml"), "--out", str(out),
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["report.html", "summary.json", "summary.txt"]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["camera_check"]["problems"] == []
+    overall = summary["held_out_tags"]["overall"]["position_m"]
+    assert overall["n"] > 0 and 0.0 < overall["median"] < 0.5
+    assert summary["acceptance"]["note"].startswith("the bag has pre-detected corners only")
+    assert summary["checkpoints"]["from"].endswith("cp.yaml")
+    assert "held-out tags" in done.stdout and "fix acceptance" in done.stdout
+
+
+def test_eval_bag_unknown_held_out_tag_is_one_line(sim_bag: Path, tmp_path: Path) -> None:
+    out = tmp_path / "eval"
+    done = run_tagloc(
+        "eval", "bag", str(sim_bag / "drive.mcap"), "--tags", str(sim_bag / "tags.yaml"),
+        "--hold-out", "999", "--out", str(out),
+    )  # fmt: skip
+    assert "--hold-out 999: no tag tag36h11:999" in one_error_line(done)
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("info_topic", ["/camera/camera_info", "/no_camera_info"])
+def test_localize_refuses_another_cameras_file(
+    sim_bag: Path, tmp_path: Path, info_topic: str
+) -> None:
+    """A halved focal length: refused before any fix, from the bag's CameraInfo or, without
+    one, from the depth of the tags against the odometry's motion."""
+    out = tmp_path / "loc"
+    done = run_tagloc(
+        "localize", str(sim_bag / "drive.mcap"), "--tags", str(sim_bag / "tags.yaml"),
+        "--cameras", str(sim_bag / "half.yaml"), "--camera-info-topic", info_topic,
+        "--out", str(out),
+    )  # fmt: skip
+    line = one_error_line(done)
+    assert "the camera model does not fit drive.mcap" in line and "refusing before any fix" in line
+    assert ("fx = 640.0 px" in line) == (info_topic == "/camera/camera_info")
+    assert not out.exists()
+
+
+@pytest.mark.slow
+def test_dupont_camera_passes_the_check(tmp_path: Path) -> None:
+    """The real drive with its own calibration: the camera check must pass."""
+    bag = DUPONT / "tag_detections.bag.bz2"
+    if not bag.is_file():
+        pytest.skip(f"dupont data set not found at {DUPONT.resolve()} (../shared/data/dupont)")
+    common = ["--cameras", str(DUPONT / "cameras.yaml"), "--camera-poses",
+              str(DUPONT / "camera_poses.yaml"), "--tagslam", str(DUPONT / "tagslam.yaml"),
+              "--corner-order", "bl_br_tr_tl", "--odom-topic", "/fla/vio/odom"]  # fmt: skip
+    tags = tmp_path / "tags.yaml"
+    done = run_tagloc("map", "build", "--bag", str(bag), *common, "--out", str(tags))
+    assert done.returncode == 0, done.stderr
+    out = tmp_path / "loc"
+    done = run_tagloc("localize", str(bag), "--tags", str(tags), *common, "--detections-topic",
+                      "/fla/ovc_node/left/tags", "--no-bag", "--out", str(out))  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    check = json.loads((out / "summary.json").read_text())["camera_check"]
+    assert check["problems"] == [] and check["n_pairs"] >= 5 and abs(check["pnp_scale"] - 1) < 0.1
+
+
+def test_eval_bag_checks_its_output_before_any_work(sim_bag: Path, tmp_path: Path) -> None:
+    taken = tmp_path / "a_file"
+    taken.write_text("keep me\n")
+    done = run_tagloc(
+        "eval", "bag", str(sim_bag / "drive.mcap"), "--tags", str(sim_bag / "tags.yaml"),
+        "--out", str(taken),
+    )  # fmt: skip
+    assert "--out" in one_error_line(done)
+    assert taken.read_text() == "keep me\n"
