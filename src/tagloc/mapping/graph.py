@@ -10,7 +10,9 @@ Variables: ``x_k`` = ``T_map_base`` of keyframe ``k``; ``l_j`` = ``T_map_tag`` o
 - tag observation ``BetweenFactorPose3(x_k, l_j, T_base_tag)`` with the PnP covariance of the
   chosen IPPE branch (right tangent, so the factor's error ``Log(Z^-1 x_k^-1 l_j)`` has exactly
   that covariance), under a Huber or Cauchy kernel so that outliers cannot fold the map;
-- ``PriorFactorPose3`` on anchor tags.
+- ``PriorFactorPose3`` on anchor tags;
+- scan-matching ``BetweenFactorPose3(x_a, x_b, T_base_a_base_b)`` from lidar registrations, when
+  the survey has scans (:mod:`tagloc.mapping.scan_factors`).
 
 Solved with Levenberg-Marquardt; tag covariances from ``gtsam.Marginals``.
 """
@@ -29,6 +31,7 @@ from tagloc.geometry import SE3
 from tagloc.mapping.config import MapBuildConfig, OdometryNoise
 from tagloc.mapping.gtsam_bridge import PERM, cov_from_gtsam, diagonal_sigmas, solver_errors
 from tagloc.mapping.initialize import inverse_h, rotation_angle
+from tagloc.mapping.scan_factors import RelativePoseFactors, add_relative_factors
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -62,6 +65,8 @@ class GraphInput:
         Anchor tags' surveyed ``T_map_tag``; empty: the first initial tag is held as the origin.
     M_map_base_init : (K, 4, 4) float
     M_map_tag_init : mapping of int to (4, 4) float
+    relative : RelativePoseFactors, optional
+        Scan-matching factors between keyframes (:mod:`tagloc.mapping.scan_factors`).
     """
 
     M_odom_base: FloatArray
@@ -72,6 +77,7 @@ class GraphInput:
     M_map_anchor: Mapping[int, FloatArray]
     M_map_base_init: FloatArray
     M_map_tag_init: Mapping[int, FloatArray]
+    relative: RelativePoseFactors | None = None
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -184,6 +190,8 @@ def build_graph(
     for k, j, M, cov in zip(data.keyframe, data.tag, data.M_base_tag, covs, strict=True):
         model = gtsam.noiseModel.Robust.Create(kernel, gtsam.noiseModel.Gaussian.Covariance(cov))
         graph.add(gtsam.BetweenFactorPose3(X(int(k)), L(int(j)), _pose3(M), model))
+    if data.relative is not None:  # lidar scan matching
+        add_relative_factors(graph, data.relative, X)
     return graph, values
 
 

@@ -5,7 +5,8 @@ Starting from the pose-factor solution, each round
 1. linearizes every factor at the current estimate, in numpy: the corners of every observation
    (:mod:`tagloc.mapping.corner_graph`, robust kernel as IRLS weights, false detections left
    out), the odometry steps with the calibration vector ``c`` as a variable
-   (:mod:`tagloc.mapping.odometry_factors`), priors on the anchors and a broad prior on ``c``;
+   (:mod:`tagloc.mapping.odometry_factors`), priors on the anchors and a broad prior on ``c``,
+   and the lidar scan-matching factors if any (:mod:`tagloc.mapping.scan_factors`);
 2. solves the sparse normal equations with GTSAM (``GaussianFactorGraph.optimize``: COLAMD
    ordering, multifrontal Cholesky);
 3. retracts (``T Exp(delta)``) with a backtracking line search on the robust objective, so it
@@ -50,6 +51,7 @@ from tagloc.mapping.odometry_factors import (
     odometry_residuals,
     prior_residuals,
 )
+from tagloc.mapping.scan_factors import RelativePoseFactors, linearize_relative, relative_cost
 
 logger = logging.getLogger(__name__)
 FloatArray = npt.NDArray[np.float64]
@@ -82,8 +84,10 @@ class _Problem:
         cameras: Mapping[str, CameraModel],
         T_base_cam: Mapping[str, SE3],
         config: MapBuildConfig,
+        relative: RelativePoseFactors | None = None,
     ) -> None:
         self.obs, self.held, self.config = obs, dict(held), config
+        self.relative = relative
         self.calibrate = config.joint_calibration
         self.cameras, self.T_base_cam = cameras, T_base_cam
         self.step_raw = inverse_h(M_odom_raw[:-1]) @ M_odom_raw[1:]
@@ -125,6 +129,8 @@ class _Problem:
             )
         if self.calibrate:
             total += 0.5 * float(np.sum((state.c / self.config.calibration_sigma) ** 2))
+        if self.relative is not None:
+            total += relative_cost(state.M_map_base, self.relative)
         return total
 
     def linearize(self, state: State) -> tuple[gtsam.GaussianFactorGraph, FloatArray]:
@@ -153,6 +159,11 @@ class _Problem:
         for j, M in self.held.items():
             e_held = prior_residuals(state.M_map_tag[j][None], M[None], self.held_sigmas)[0]
             graph.add(gtsam.JacobianFactor(L(j), np.diag(1.0 / self.held_sigmas), -e_held, unit6))
+        if self.relative is not None:  # lidar scan matching, IRLS-weighted
+            e_rel, A_a, A_b = linearize_relative(state.M_map_base, self.relative)
+            for a, b, e_i, A_ai, A_bi in zip(self.relative.a, self.relative.b, e_rel, A_a, A_b,
+                                             strict=True):  # fmt: skip
+                graph.add(gtsam.JacobianFactor(X(int(a)), A_ai, X(int(b)), A_bi, -e_i, unit6))
         if self.calibrate:
             s = self.config.calibration_sigma
             graph.add(gtsam.JacobianFactor(
@@ -192,6 +203,7 @@ def refine_with_corners(
     cameras: Mapping[str, CameraModel],
     T_base_cam: Mapping[str, SE3],
     config: MapBuildConfig,
+    relative: RelativePoseFactors | None = None,
 ) -> tuple[GraphSolution, State]:
     """Refine ``start`` with the corners (module docstring).
 
@@ -208,6 +220,8 @@ def refine_with_corners(
     config : MapBuildConfig
         ``joint_calibration``: estimate the odometry calibration vector jointly (else it stays
         at ``start.c``).
+    relative : RelativePoseFactors, optional
+        Lidar scan-matching factors between keyframes.
 
     Returns
     -------
@@ -215,7 +229,7 @@ def refine_with_corners(
         ``mahalanobis`` is the corners' whitened norm per observation; ``linear`` the last
         linearization (for :func:`tagloc.mapping.graph.marginal_covariances`).
     """
-    problem = _Problem(obs, M_odom_raw, held, cameras, T_base_cam, config)
+    problem = _Problem(obs, M_odom_raw, held, cameras, T_base_cam, config, relative)
     calibrate = problem.calibrate
     state, cost = start, problem.objective(start)
     cost_initial, rounds, solve_s = cost, 0, 0.0
@@ -268,6 +282,7 @@ def refine_and_test_tilts(
     cameras: Mapping[str, CameraModel],
     T_base_cam: Mapping[str, SE3],
     config: MapBuildConfig,
+    relative: RelativePoseFactors | None = None,
 ) -> tuple[GraphSolution, State, list[int]]:
     """Refine, test every tag's tilt (:mod:`tagloc.mapping.flips`), refine again while tags
     flip (at most :data:`MAX_FLIP_PASSES` tests).
@@ -279,7 +294,7 @@ def refine_and_test_tilts(
     ambiguous: list[int] = []
     for pass_ in range(MAX_FLIP_PASSES + 1):
         solution, state = refine_with_corners(
-            obs, M_odom_raw, state, held, cameras, T_base_cam, config
+            obs, M_odom_raw, state, held, cameras, T_base_cam, config, relative
         )
         rounds += solution.iterations
         solve_s += solution.optimize_s
