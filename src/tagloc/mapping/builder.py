@@ -58,6 +58,7 @@ from tagloc.mapping.graph import (
     solve_graph,
 )
 from tagloc.mapping.gtsam_bridge import SolverError
+from tagloc.mapping.lidar_survey import prepare_lidar
 from tagloc.mapping.initialize import (
     choose_branches,
     initialize_keyframes,
@@ -67,6 +68,7 @@ from tagloc.mapping.initialize import (
 from tagloc.mapping.observations import Observations, collect_observations
 from tagloc.mapping.refine import State, refine_and_test_tilts
 from tagloc.mapping.report import BuildReport, TagQA, reprojection_residuals, rms
+from tagloc.mapping.scan_factors import RelativePoseFactors
 from tagloc.mapping.survey import MappingError, Survey, TagKey
 from tagloc.tags.tagmap import DEFAULT_FAMILY, TagEntry, TagMap
 
@@ -98,6 +100,7 @@ def _graph_input(
     anchors: Mapping[int, np.ndarray],
     M_map_base: np.ndarray,
     M_map_tag: Mapping[int, np.ndarray],
+    relative: RelativePoseFactors | None = None,
 ) -> GraphInput:
     rows = np.arange(len(obs))
     return GraphInput(
@@ -109,6 +112,7 @@ def _graph_input(
         M_map_anchor=anchors,
         M_map_base_init=M_map_base,
         M_map_tag_init=M_map_tag,
+        relative=relative,
     )
 
 
@@ -152,6 +156,12 @@ def build_tag_map(
         survey, config.pnp_noise, config.max_range_m, pnp_progress, config.observation_covariance
     )
     timings["observations"] = time.perf_counter() - t_start
+    # 1b. lidar keyframes: pose variables at sweeps, their scans prepared for registration
+    t = time.perf_counter()
+    lidar = prepare_lidar(survey, obs, config.lidar)
+    if lidar is not None:
+        obs, scans = lidar
+    timings["lidar_keyframes"] = time.perf_counter() - t
     # 2. initial values
     t = time.perf_counter()
     M_anchor = _anchor_indices(anchors, obs, survey.source)
@@ -167,13 +177,18 @@ def build_tag_map(
         M_map_base_odometry = _odometry_in_map(obs, M_map_base)
         M_odom_raw = obs.T_odom_base.as_matrix().reshape(-1, 4, 4)
         M_odom_base, calibration = M_odom_raw, OdometryCalibration.identity()
+        t_scan = time.perf_counter()
+        relative = None if lidar is None else scans.sequential(M_odom_raw)
+        scan_s = time.perf_counter() - t_scan
         solution: GraphSolution | None = None
         iterations, optimize_s, error_initial = 0, 0.0, float("nan")
         n_rounds = config.rounds + config.calibration_rounds
         for round_ in range(n_rounds):
             if progress is not None:
                 progress("optimize", round_, n_rounds)
-            data = _graph_input(obs, M_odom_base, branch, M_anchor, M_map_base, M_map_tag)
+            data = _graph_input(
+                obs, M_odom_base, branch, M_anchor, M_map_base, M_map_tag, relative
+            )
             solution = solve_graph(data, config)
             iterations += solution.iterations
             optimize_s += solution.optimize_s
@@ -183,6 +198,12 @@ def build_tag_map(
             changed = int((new_branch != branch).sum())
             branch = new_branch
             calibrate = round_ + 1 >= config.rounds and round_ + 1 < n_rounds
+            closed = 0
+            if lidar is not None and relative is not None and round_ == 0:
+                t_scan = time.perf_counter()  # loop closures at the first estimate
+                loops = scans.loops(M_map_base)
+                relative, closed = relative.concat(loops), len(loops)
+                scan_s += time.perf_counter() - t_scan
             logger.info(
                 "round %d: %d iterations, %d branches changed", round_, solution.iterations, changed
             )
@@ -190,10 +211,11 @@ def build_tag_map(
                 calibration = fit_calibration(M_odom_raw, M_map_base)
                 M_odom_base = apply_calibration(M_odom_raw, calibration)
                 logger.info("odometry calibration: %s", calibration)
-            elif not changed:
+            elif not changed and not closed:
                 break
         assert solution is not None
-        timings["pose_rounds"] = time.perf_counter() - t
+        timings["pose_rounds"] = time.perf_counter() - t - scan_s
+        timings["scan_matching"] = scan_s
         t_refine = time.perf_counter()
         ambiguous: list[int] = []
         held = held_tags(M_anchor, obs.tag, M_map_tag)
@@ -208,6 +230,7 @@ def build_tag_map(
                 survey.cameras,
                 survey.T_base_cam,
                 config,
+                relative,
             )
             iterations += solution.iterations
             optimize_s += solution.optimize_s
@@ -224,8 +247,9 @@ def build_tag_map(
             solution = marginal_covariances(solution)
         elif config.compute_covariance:
             data = _graph_input(
-                obs, M_odom_base, branch, M_anchor, solution.M_map_base, solution.M_map_tag
-            )
+                obs, M_odom_base, branch, M_anchor, solution.M_map_base, solution.M_map_tag,
+                relative,
+            )  # fmt: skip
             graph, values = build_graph(data, config)
             at = replace(solution, graph=graph, values=values)
             solution = replace(solution, cov_map_tag=marginal_covariances(at).cov_map_tag)
@@ -243,6 +267,8 @@ def build_tag_map(
     object.__setattr__(report, "timings_s", timings)
     object.__setattr__(report, "iterations", iterations)
     object.__setattr__(report, "error_initial", error_initial)
+    if lidar is not None:
+        object.__setattr__(report, "scan_matching", scans.stats.as_dict())
     return tag_map, report
 
 

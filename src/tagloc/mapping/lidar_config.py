@@ -17,6 +17,9 @@ class LidarSurveyConfig(BaseModel):
     keyframe_distance_m, keyframe_turn_deg : float
         A sweep becomes a lidar keyframe (a pose variable of the graph) after this much travel
         or turn of the odometry since the last one.
+    deskew_window_s : float
+        Sweeps are de-skewed at the odometry's mean velocity over this window around them
+        (:func:`tagloc.mapping.lidar_survey.sweep_motion` says why).
     voxel_m : float
         Voxel size the keyframe scans are downsampled to before registration.
     max_range_m : float
@@ -52,7 +55,8 @@ class LidarSurveyConfig(BaseModel):
     enabled: bool = True
     keyframe_distance_m: float = Field(0.75, gt=0.0)
     keyframe_turn_deg: float = Field(20.0, gt=0.0)
-    voxel_m: float = Field(0.1, gt=0.0)
+    deskew_window_s: float = Field(0.2, gt=0.0)
+    voxel_m: float = Field(0.15, gt=0.0)
     max_range_m: float = Field(20.0, gt=0.0)
     max_correspondence_m: float = Field(0.5, gt=0.0)
     min_inlier_fraction: float = Field(0.5, ge=0.0, le=1.0)
@@ -61,8 +65,8 @@ class LidarSurveyConfig(BaseModel):
     loop_min_travel_m: float = Field(10.0, gt=0.0)
     loops_per_keyframe: int = Field(1, ge=0)
     loop_stride: int = Field(2, ge=1)
-    information_scale: float = Field(1.0, gt=0.0)
-    min_sigma_m: float = Field(0.003, gt=0.0)
-    min_sigma_rad: float = Field(0.0005, gt=0.0)
+    information_scale: float = Field(0.5, gt=0.0)
+    min_sigma_m: float = Field(0.005, gt=0.0)
+    min_sigma_rad: float = Field(0.003, gt=0.0)
     kernel: Literal["huber", "cauchy"] = "cauchy"
     robust_k: float = Field(3.0, gt=0.0)
