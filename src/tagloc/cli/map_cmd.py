@@ -2,6 +2,9 @@
 
 - ``tagloc map check tags.yaml`` prints ``tags.yaml: ok: <summary>`` (tags per family, tags per
   frame, anchors), or one error line naming file, entry and field, and exits 1.
+- ``tagloc map build --out tags.yaml ...`` builds a tag map from a survey; with lidar sweeps it
+  also writes ``premap.ply`` (or ``.pcd``) and ``map.yaml`` + ``map.pgm`` beside it, all in
+  ``map``, all or none (:func:`tagloc.io.survey_files.write_survey_outputs`).
 - ``tagloc map diff old.yaml new.yaml`` prints one line per change (see
   :mod:`tagloc.tags.tagmap_diff`), or ``no differences``. It exits 0 either way; with
   ``--exit-code`` it exits 1 when there are differences, like ``git diff --exit-code`` (an
@@ -11,7 +14,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Literal, cast
 
 import typer
 
@@ -139,6 +142,7 @@ def _bag_survey(
     corner_order: str,
     tag_size: float | None,
     sizes: dict[int, float],
+    lidar_topic: str | None,
 ) -> tuple[Survey, dict[int, SE3]]:
     from tagloc.geometry import SE3
     from tagloc.io import BagSource, load_kalibr_cameras
@@ -163,9 +167,8 @@ def _bag_survey(
     rig = None
     if tagslam is not None:
         rig = parse_tagslam(_read_text(tagslam, "tagslam configuration"), str(tagslam))
-    source = BagSource(
-        bag, [*topics, odom_topic], corner_order=corner_order, default_family="tag36h11"
-    )
+    wanted = [*topics, odom_topic, *([lidar_topic, "/tf_static"] if lidar_topic else [])]
+    source = BagSource(bag, wanted, corner_order=corner_order, default_family="tag36h11")
     survey = survey_from_tagslam(
         source,
         topics,
@@ -176,8 +179,14 @@ def _bag_survey(
         tag_sizes=sizes,
         default_tag_size=tag_size,
         source=str(bag),
+        lidar_topic=lidar_topic,
     )
     return survey, dict(rig.anchors) if rig else {}
+
+
+def _product_paths(out: Path, premap_format: str) -> tuple[Path, Path, Path]:
+    """``premap.<format>``, ``map.yaml`` and ``map.pgm`` beside the tag map."""
+    return out.parent / f"premap.{premap_format}", out.parent / "map.yaml", out.parent / "map.pgm"
 
 
 @map_app.command("build")
@@ -218,6 +227,15 @@ def map_build(
     ] = None,
     size: Annotated[list[str], typer.Option(help="ID=EDGE_M per tag (repeat).")] = [],  # noqa: B006
     report: Annotated[Path | None, typer.Option(help="QA report file (.json or .md).")] = None,
+    no_lidar: Annotated[
+        bool, typer.Option("--no-lidar", help="Tags and odometry only (no scan matching).")
+    ] = False,
+    lidar_topic: Annotated[
+        str, typer.Option(help="PointCloud2 topic of the lidar (with --bag).")
+    ] = "/lidar/points",
+    premap_format: Annotated[
+        str, typer.Option(help="Premap file beside --out: ply (premap.ply) or pcd (premap.pcd).")
+    ] = "ply",
     calibrate_odometry: Annotated[
         int | None,
         typer.Option(
@@ -227,20 +245,29 @@ def map_build(
         ),
     ] = None,
 ) -> None:
-    """Build a tag map from a survey drive (a bag, or --sim) and print its QA report."""
+    """Build a tag map from a survey drive (a bag, or --sim) and print its QA report; with lidar
+    sweeps (and no --no-lidar) also the premap and the occupancy grid beside --out."""
     from rich.progress import Progress
 
-    from tagloc.fileutil import atomic_write_texts, check_outputs
+    from tagloc.fileutil import check_outputs
+    from tagloc.io.survey_files import write_survey_outputs
     from tagloc.mapping import MapBuildConfig, MappingError, build_tag_map
-    from tagloc.sim.survey import build_map_from_drive, sim_build_config
+    from tagloc.mapping.products import build_products
+    from tagloc.sim.survey import sim_build_config, survey_and_anchors
     from tagloc.tags.tagmap import load_tag_map
 
     if sim == (bag is not None):
         raise MappingError("give exactly one of --bag PATH or --sim")
     if sim and anchors is not None:
         raise MappingError("--anchors is for --bag (with --sim, give --anchor ID: true poses)")
+    if premap_format not in ("ply", "pcd"):
+        raise OptionError(f"--premap-format {premap_format!r}: expected ply or pcd")
+    fmt = cast(Literal["ply", "pcd"], premap_format)
+    premap_path, grid_yaml, grid_pgm = _product_paths(out, fmt)
+    products = {} if no_lidar else {"premap": premap_path, "map.yaml": grid_yaml,
+                                    "map.pgm": grid_pgm}  # fmt: skip
     check_outputs(
-        {"--out": out, "--report": report},
+        {"--out": out, "--report": report, **products},
         inputs={"--bag": bag, "--world": world, "--cameras": cameras,
                 "--camera-poses": camera_poses, "--tagslam": tagslam, "--anchors": anchors},
     )  # fmt: skip
@@ -262,13 +289,8 @@ def map_build(
             drive = simulate_drive(sim_world, seed=seed)
             observation_config = ObservationConfig(seed=seed)
             config = sim_build_config(drive, observation_config).model_copy(update=rounds)
-            tag_map, qa = build_map_from_drive(
-                drive,
-                observation_config,
-                anchors=anchor or None,
-                config=config,
-                camera_stride=camera_stride,
-                progress=progress,
+            survey, T_map_anchor = survey_and_anchors(
+                drive, observation_config, anchor or None, camera_stride, lidar=not no_lidar
             )
         else:
             from tagloc.geometry import SE3
@@ -286,6 +308,7 @@ def map_build(
                 corner_order,
                 tag_size,
                 sizes,
+                None if no_lidar else lidar_topic,
             )
             known.update(known_anchors)
             chosen = anchor or sorted(known)
@@ -297,10 +320,26 @@ def map_build(
             # one anchor without a known pose defines the map frame (identity pose)
             T_map_anchor = {i: known.get(i, SE3.identity()) for i in chosen}
             config = MapBuildConfig(**rounds)
-            tag_map, qa = build_tag_map(survey, T_map_anchor, config, progress)
+        tag_map, qa = build_tag_map(survey, T_map_anchor, config, progress)
+        built = None
+        if survey.lidar is not None and not no_lidar:
+            bar.update(task, description="premap and occupancy grid")
+            built = build_products(survey, qa, lidar_config=config.lidar)
     files = {out: tag_map.to_yaml_text()}
     if report is not None:
         files[report] = qa.to_json() if report.suffix == ".json" else qa.to_markdown()
-    atomic_write_texts(files)  # both or neither
+    if built is None:
+        write_survey_outputs(files)  # all or none
+    else:
+        write_survey_outputs(
+            files, (premap_path, built.premap_map, fmt), (grid_yaml, built.grid)
+        )
     typer.echo("\n".join(qa.summary_lines()))
     typer.echo(f"wrote {out} ({tag_map.summary()})")
+    if built is not None:
+        height, width = built.grid.shape
+        typer.echo(
+            f"wrote {premap_path} ({len(built.premap_map)} points from {built.scans} scans), "
+            f"{grid_yaml} + {grid_pgm.name} ({width} x {height} cells of "
+            f"{built.grid.resolution_m:g} m), in frame map"
+        )
