@@ -78,6 +78,7 @@ class NodeTopics:
     camera_info: str = "/camera/camera_info"
     truth: str = "/ground_truth"
     tf: str = "/tf"
+    lidar: str = "/lidar/points"
 
 
 @dataclass(frozen=True, slots=True)
