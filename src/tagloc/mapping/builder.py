@@ -58,7 +58,7 @@ from tagloc.mapping.graph import (
     solve_graph,
 )
 from tagloc.mapping.gtsam_bridge import SolverError
-from tagloc.mapping.lidar_survey import prepare_lidar
+from tagloc.mapping.lidar_survey import prepare_lidar, scan_odometry
 from tagloc.mapping.initialize import (
     choose_branches,
     initialize_keyframes,
@@ -159,13 +159,20 @@ def build_tag_map(
     # 1b. lidar keyframes: pose variables at sweeps, their scans prepared for registration
     t = time.perf_counter()
     lidar = prepare_lidar(survey, obs, config.lidar)
+    relative: RelativePoseFactors | None = None
+    obs_init = obs
     if lidar is not None:
         obs, scans = lidar
-    timings["lidar_keyframes"] = time.perf_counter() - t
+        timings["lidar_keyframes"] = time.perf_counter() - t
+        # consecutive registrations from the odometry; the scan-corrected odometry initializes
+        t = time.perf_counter()
+        relative = scans.sequential(obs.T_odom_base.as_matrix().reshape(-1, 4, 4))
+        obs_init = replace(obs, T_odom_base=scan_odometry(obs, relative, config))
+        timings["scan_matching"] = time.perf_counter() - t
     # 2. initial values
     t = time.perf_counter()
     M_anchor = _anchor_indices(anchors, obs, survey.source)
-    M_map_base = initialize_keyframes(obs, M_anchor, config.max_ambiguity_for_init)
+    M_map_base = initialize_keyframes(obs_init, M_anchor, config.max_ambiguity_for_init)
     M_map_tag = initialize_tags(obs, M_map_base, M_anchor)
     branch = choose_branches(obs, M_map_base, M_map_tag)
     timings["initialize"] = time.perf_counter() - t
@@ -177,9 +184,7 @@ def build_tag_map(
         M_map_base_odometry = _odometry_in_map(obs, M_map_base)
         M_odom_raw = obs.T_odom_base.as_matrix().reshape(-1, 4, 4)
         M_odom_base, calibration = M_odom_raw, OdometryCalibration.identity()
-        t_scan = time.perf_counter()
-        relative = None if lidar is None else scans.sequential(M_odom_raw)
-        scan_s = time.perf_counter() - t_scan
+        scan_s = 0.0
         solution: GraphSolution | None = None
         iterations, optimize_s, error_initial = 0, 0.0, float("nan")
         n_rounds = config.rounds + config.calibration_rounds
@@ -215,7 +220,7 @@ def build_tag_map(
                 break
         assert solution is not None
         timings["pose_rounds"] = time.perf_counter() - t - scan_s
-        timings["scan_matching"] = scan_s
+        timings["scan_matching"] = timings.get("scan_matching", 0.0) + scan_s
         t_refine = time.perf_counter()
         ambiguous: list[int] = []
         held = held_tags(M_anchor, obs.tag, M_map_tag)

@@ -33,6 +33,9 @@ class LidarSurveyConfig(BaseModel):
         Loop-closure candidates: keyframes this close (horizontally) in the current estimate...
     loop_min_travel_m : float
         ... that the robot reached this far apart along its path (a loop, not a neighbour).
+    loop_max_correction_m, loop_max_correction_deg : float
+        A loop registration that moves this far from the estimate's relative pose is not used
+        (it may have slid onto the next look-alike place: a corridor's doors and niches repeat).
     loops_per_keyframe : int
         At most this many loop closures from each keyframe (the nearest candidates).
     loop_stride : int
@@ -63,6 +66,8 @@ class LidarSurveyConfig(BaseModel):
     max_rmse_m: float = Field(0.1, gt=0.0)
     loop_radius_m: float = Field(3.0, gt=0.0)
     loop_min_travel_m: float = Field(10.0, gt=0.0)
+    loop_max_correction_m: float = Field(1.0, gt=0.0)
+    loop_max_correction_deg: float = Field(10.0, gt=0.0)
     loops_per_keyframe: int = Field(1, ge=0)
     loop_stride: int = Field(2, ge=1)
     information_scale: float = Field(0.5, gt=0.0)
