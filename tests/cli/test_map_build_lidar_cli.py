@@ -14,7 +14,7 @@ from tagloc.io.pointcloud_files import read_pcd, read_ply
 from tagloc.tags.tagmap import load_tag_map
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "mapping"))
-from survey_worlds import room_loop_world  # noqa: E402
+from survey_worlds import room_loop_world
 
 
 def _world(tmp_path: Path) -> Path:

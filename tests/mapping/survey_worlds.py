@@ -3,15 +3,16 @@
 - :func:`room_loop_world`: the office with a short route (rooms a and b and back, ~60 m): a
   survey that closes loops in a few seconds of simulation.
 - :func:`sparse_tag_world`: a loop corridor (48 m x 16 m outside, 2.4 m wide, 118 m around)
-  with a tag every 12 m along it and niches every 4 m in the outer wall (what a scan matcher
-  holds on to along a corridor), driven twice by a legged robot whose odometry drifts 0.3 deg
-  of yaw per metre.
+  with niches every 4 m in the outer wall (what a scan matcher holds on to along a corridor)
+  and a tag every 12 m along it, each on a 0.3 m pillar of the outer wall facing the oncoming
+  robot; driven twice by a legged robot whose odometry drifts 0.3 deg of yaw per metre.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
 import yaml
 
 from tagloc.sim import World, load_default_world
@@ -46,7 +47,8 @@ def sparse_tag_world(yaw_bias_deg_per_m: float = 0.3, laps: int = 2) -> World:
         walls += [{"start": [x, 0.0], "end": [x, 0.3]}, {"start": [x, 16.0], "end": [x, 15.7]}]
     for y in range(4, 16, 4):
         walls += [{"start": [0.0, y], "end": [0.3, y]}, {"start": [48.0, y], "end": [47.7, y]}]
-    # a tag every 12 m along the corridor's centre line, on the inner block, facing out
+    # a tag every 12 m along the corridor's centre line, on a pillar of the outer wall, facing
+    # back along the corridor (a tag on a side wall is seen edge-on by a forward camera)
     tags, s, tag_id = [], 6.0, 0
     legs = [((1.2, 1.2), (46.8, 1.2), (0, -1)), ((46.8, 1.2), (46.8, 14.8), (1, 0)),
             ((46.8, 14.8), (1.2, 14.8), (0, 1)), ((1.2, 14.8), (1.2, 1.2), (-1, 0))]  # fmt: skip
@@ -56,11 +58,15 @@ def sparse_tag_world(yaw_bias_deg_per_m: float = 0.3, laps: int = 2) -> World:
         while s < start + length:
             f = (s - start) / length
             x, y = ax + f * (bx - ax), ay + f * (by - ay)
-            # the inner wall is 1.2 m from the centre line, on the side opposite the normal
-            wx, wy = x - 1.2 * nx, y - 1.2 * ny
-            yaw = {(0, -1): -90, (1, 0): 0, (0, 1): 90, (-1, 0): 180}[(nx, ny)]
+            # the outer wall is 1.2 m from the centre line along the normal; the pillar stands
+            # 0.3 m into the corridor, the tag on its face towards the robot coming along
+            ox, oy = x + 1.2 * nx, y + 1.2 * ny
+            walls.append({"start": [ox, oy], "end": [ox - 0.3 * nx, oy - 0.3 * ny]})
+            dx, dy = np.sign(bx - ax), np.sign(by - ay)  # direction of travel
+            yaw = float(np.degrees(np.arctan2(-dy, -dx)))
+            cx, cy = ox - 0.15 * nx - 0.001 * dx, oy - 0.15 * ny - 0.001 * dy
             tags.append({"id": tag_id, "size": 0.16,
-                         "wall": {"x": wx, "y": wy, "yaw_deg": yaw, "height": 1.3}})  # fmt: skip
+                         "wall": {"x": cx, "y": cy, "yaw_deg": yaw, "height": 1.3}})  # fmt: skip
             tag_id, s = tag_id + 1, s + 12.0
         start += length
     data["walls"], data["tags"] = walls, tags

@@ -30,8 +30,8 @@ def _loop(n: int, radius: float = 4.0) -> np.ndarray:
     """``(n, 4, 4)`` true ``T_map_base`` around a circle (yaw along the path, a little z)."""
     out = np.tile(np.eye(4), (n, 1, 1))
     for k, a in enumerate(np.linspace(0.0, 2 * np.pi, n, endpoint=False)):
-        out[k] = SE3.from_rotvec([0.0, 0.0, a + np.pi / 2],
-                                 [radius * np.cos(a), radius * np.sin(a), 0.01 * k]).as_matrix()  # fmt: skip
+        xyz = [radius * np.cos(a), radius * np.sin(a), 0.01 * k]
+        out[k] = SE3.from_rotvec([0.0, 0.0, a + np.pi / 2], xyz).as_matrix()
     return out
 
 
@@ -86,9 +86,10 @@ def test_jacobians_match_numerical_differentiation() -> None:
     rng = np.random.default_rng(3)
     M = _loop(6) @ SE3.exp(rng.normal(size=(6, 6)) * 0.05).as_matrix()
     factors = _measure(_loop(6), [(0, 1), (1, 3), (5, 2)], np.array([0.02] * 3 + [0.01] * 3), rng)
+    # kernel weight 1: plain least squares
     factors = RelativePoseFactors(factors.a, factors.b, factors.M_a_b, factors.sqrt_information,
-                                  factors.loop, "huber", 1e9)  # weight 1: plain least squares  # fmt: skip
-    e, A_a, A_b = linearize_relative(M, factors)
+                                  factors.loop, "huber", 1e9)  # fmt: skip
+    _, A_a, A_b = linearize_relative(M, factors)
     h = 1e-6
     for which, A in (("a", A_a), ("b", A_b)):
         for d in range(6):
@@ -100,7 +101,8 @@ def test_jacobians_match_numerical_differentiation() -> None:
                 Mp[k] = M[k] @ SE3.exp(step).as_matrix()
                 Mm = M.copy()
                 Mm[k] = M[k] @ SE3.exp(-step).as_matrix()
-                numeric = (relative_errors(Mp, factors)[i] - relative_errors(Mm, factors)[i]) / (2 * h)
+                plus, minus = relative_errors(Mp, factors)[i], relative_errors(Mm, factors)[i]
+                numeric = (plus - minus) / (2 * h)
                 assert np.allclose(A[i][:, d], numeric, atol=1e-5)
 
 
@@ -180,7 +182,8 @@ def test_degenerate_direction_does_not_pull() -> None:
     M1_scan = SE3.from_rotvec([0.0, 0.0, 0.05], [1.4, 0.2, 0.0]).as_matrix()
     info = np.diag([0.0, 1e6, 1e6, 1e6, 1e6, 1e6])  # x unconstrained
     scan = RelativePoseFactors(np.array([0]), np.array([1]), M1_scan[None],
-                               sqrt_information(info)[None], np.array([False]), "huber", 1e9)  # fmt: skip
+                               sqrt_information(info)[None], np.array([False]), "huber",
+                               1e9)  # fmt: skip
     odo_sig = np.array([0.05, 0.05, 0.05, 0.01, 0.01, 0.01])
     odometry = RelativePoseFactors(np.array([0]), np.array([1]), M1_odo[None],
                                    sqrt_information(np.diag(1 / odo_sig**2))[None],

@@ -331,9 +331,7 @@ def map_build(
     if built is None:
         write_survey_outputs(files)  # all or none
     else:
-        write_survey_outputs(
-            files, (premap_path, built.premap_map, fmt), (grid_yaml, built.grid)
-        )
+        write_survey_outputs(files, (premap_path, built.premap_map, fmt), (grid_yaml, built.grid))
     typer.echo("\n".join(qa.summary_lines()))
     typer.echo(f"wrote {out} ({tag_map.summary()})")
     if built is not None:

@@ -6,12 +6,17 @@
 - :func:`build_tag_map` -> ``(TagMap, BuildReport)``; :mod:`tagloc.sim.survey` builds one
   from a simulated drive and measures it against the simulated world.
 - :class:`MapBuildConfig`: the tunables.
+- With lidar sweeps in the survey (:class:`SurveyScans`): scan-matching factors
+  (:mod:`tagloc.mapping.lidar_survey`, :mod:`tagloc.mapping.scan_factors`; tunables
+  :class:`LidarSurveyConfig`) and the premap and occupancy grid at the optimized poses
+  (:func:`tagloc.mapping.products.build_products`).
 
 Errors are :class:`MappingError`.
 """
 
 from tagloc.mapping.builder import build_tag_map
 from tagloc.mapping.config import MapBuildConfig, OdometryNoise
+from tagloc.mapping.lidar_config import LidarSurveyConfig
 from tagloc.mapping.report import BuildReport, TagQA
 from tagloc.mapping.stream_survey import (
     RigConfig,
@@ -22,15 +27,18 @@ from tagloc.mapping.stream_survey import (
     survey_from_tagslam,
 )
 from tagloc.mapping.survey import CameraFrame, MappingError, Survey, only_cameras
+from tagloc.mapping.survey_scans import SurveyScans
 
 __all__ = [
     "BuildReport",
     "CameraFrame",
+    "LidarSurveyConfig",
     "MapBuildConfig",
     "MappingError",
     "OdometryNoise",
     "RigConfig",
     "Survey",
+    "SurveyScans",
     "TagQA",
     "build_tag_map",
     "corner_rotation_by_gravity",

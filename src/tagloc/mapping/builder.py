@@ -3,12 +3,16 @@
 :func:`build_tag_map` reads as its steps:
 
 1. PnP on every detection, keyframes at the frame stamps (:mod:`tagloc.mapping.observations`);
+   with lidar sweeps, also keyframes at a sweep every ``lidar.keyframe_distance_m``, their
+   consecutive scans registered, and the odometry corrected by them for the initialization
+   (:mod:`tagloc.mapping.lidar_survey`);
 2. initial keyframe and tag poses, IPPE branch per observation (:mod:`tagloc.mapping.initialize`);
 3. pose-factor rounds (:mod:`tagloc.mapping.graph`, GTSAM Levenberg-Marquardt): optimize,
    re-pick each observation's branch at the optimum, again while branches change; optionally
-   calibrate the odometry (:mod:`tagloc.mapping.calibration`) between rounds;
+   calibrate the odometry (:mod:`tagloc.mapping.calibration`) between rounds; with lidar, the
+   scan-matching factors in every round and loop closures found at the first optimum;
 4. corner refinement (:mod:`tagloc.mapping.refine`: Gauss-Newton on the corners, the odometry
-   with its calibration and the anchors), then the tilt test of every tag
+   with its calibration, the anchors and the scan factors), then the tilt test of every tag
    (:mod:`tagloc.mapping.flips`) and, if a tag flipped, the refinement again;
 5. marginal covariance of every tag; QA (:mod:`tagloc.mapping.report`) and the TagMap.
 
@@ -58,13 +62,13 @@ from tagloc.mapping.graph import (
     solve_graph,
 )
 from tagloc.mapping.gtsam_bridge import SolverError
-from tagloc.mapping.lidar_survey import prepare_lidar, scan_odometry
 from tagloc.mapping.initialize import (
     choose_branches,
     initialize_keyframes,
     initialize_tags,
     inverse_h,
 )
+from tagloc.mapping.lidar_survey import prepare_lidar, scan_odometry
 from tagloc.mapping.observations import Observations, collect_observations
 from tagloc.mapping.refine import State, refine_and_test_tilts
 from tagloc.mapping.report import BuildReport, TagQA, reprojection_residuals, rms
@@ -191,9 +195,7 @@ def build_tag_map(
         for round_ in range(n_rounds):
             if progress is not None:
                 progress("optimize", round_, n_rounds)
-            data = _graph_input(
-                obs, M_odom_base, branch, M_anchor, M_map_base, M_map_tag, relative
-            )
+            data = _graph_input(obs, M_odom_base, branch, M_anchor, M_map_base, M_map_tag, relative)
             solution = solve_graph(data, config)
             iterations += solution.iterations
             optimize_s += solution.optimize_s

@@ -108,7 +108,7 @@ def sqrt_information(information: FloatArray) -> FloatArray:
 
 def _upper(root: FloatArray) -> FloatArray:
     """Upper-triangular ``R`` with ``R^T R = root^T root`` and a positive diagonal."""
-    R = np.linalg.qr(root, mode="r")
+    R = np.asarray(np.linalg.qr(root, mode="r"))
     return np.asarray(np.where(np.diag(R)[:, None] < 0.0, -R, R))
 
 
@@ -161,6 +161,7 @@ def add_relative_factors(
     ``key(k)`` names keyframe ``k``'s variable. GTSAM orders the tangent rotation first: with
     ``v_tagloc = v_gtsam[PERM]``, the square root becomes ``R[:, PERM]``.
     """
+    kernel: gtsam.noiseModel.mEstimator.Base
     if factors.kernel == "huber":
         kernel = gtsam.noiseModel.mEstimator.Huber.Create(factors.robust_k)
     else:

@@ -60,7 +60,9 @@ class SurveyScans:
         for i, (points, offsets) in enumerate(zip(self.points_lidar, self.time_offset_s,
                                                   strict=True)):  # fmt: skip
             if points.ndim != 2 or points.shape[1] != 3:
-                raise SurveyScanError(f"lidar: sweep {i}: points must be (N, 3), got {points.shape}")
+                raise SurveyScanError(
+                    f"lidar: sweep {i}: points must be (N, 3), got {points.shape}"
+                )
             if offsets is not None and offsets.shape != (len(points),):
                 raise SurveyScanError(
                     f"lidar: sweep {i}: {len(points)} points but {offsets.shape} time offsets"
@@ -83,6 +85,7 @@ def select_sweeps(
     for i in range(1, len(positions_m)):
         j = keep[-1]
         turn = abs(np.angle(np.exp(1j * (yaw_rad[i] - yaw_rad[j]))))
-        if np.linalg.norm(positions_m[i] - positions_m[j]) >= min_distance_m or turn >= min_turn_rad:
+        moved = float(np.linalg.norm(positions_m[i] - positions_m[j]))
+        if moved >= min_distance_m or turn >= min_turn_rad:
             keep.append(i)
     return np.asarray(keep, dtype=np.int64)

@@ -15,7 +15,6 @@ import numpy as np
 import numpy.typing as npt
 
 from tagloc.geometry import SE3
-
 from tagloc.mapping.builder import ProgressFn, build_tag_map
 from tagloc.mapping.config import MapBuildConfig, OdometryNoise
 from tagloc.mapping.report import BuildReport

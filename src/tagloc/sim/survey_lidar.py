@@ -22,7 +22,9 @@ from tagloc.sim.lidar import LidarSimulator
 from tagloc.sim.robot import LidarConfig, LidarMount
 
 #: The scanner of a survey in a world whose robot has none.
-SURVEY_LIDAR = LidarConfig(T_base_lidar=LidarMount(position=(0.0, 0.0, 0.5), rpy_deg=(0.0, 0.0, 0.0)))
+SURVEY_LIDAR = LidarConfig(
+    T_base_lidar=LidarMount(position=(0.0, 0.0, 0.5), rpy_deg=(0.0, 0.0, 0.0))
+)
 
 
 def survey_scans_of(
