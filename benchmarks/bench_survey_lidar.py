@@ -2,7 +2,7 @@
 
 Run: ``.venv/bin/python benchmarks/bench_survey_lidar.py [--seed N]``
 
-The demo's survey of the built-in office (legged odometry, seed 2, one anchor, every third
+The demo's survey of the built-in office (legged odometry, seed 1, one anchor, every third
 camera frame; the sweeps a recorder keeps every 0.5 m) built three ways on the same simulated
 drive:
 
@@ -37,7 +37,7 @@ STRIDE = 3  # as the demo
 
 def main() -> None:
     parser = argparse.ArgumentParser()
-    parser.add_argument("--seed", type=int, default=2)
+    parser.add_argument("--seed", type=int, default=1)
     seed = parser.parse_args().seed
     world = load_default_world()
     drive = simulate_drive(world, seed=seed)

@@ -132,7 +132,7 @@ def test_survey_from_messages_keeps_sweeps_by_travel_and_reads_the_mount() -> No
     for k in range(50):  # 0.1 m per 100 ms, a sweep every 100 ms
         stamp = k * 100_000_000
         pose = SE3.from_rotvec([0.0, 0.0, 0.0], [0.1 * k, 0.0, 0.0])
-        items.append(("/odom", OdometryMsg(stamp, "odom", "base_link", pose)))
+        items.append(("/odom", OdometryMsg(stamp, "odom", "base_link", pose, np.eye(6) * 1e-4)))
         items.append(("/lidar/points", PointCloudMsg(stamp + 1, "lidar", points)))
     items.append(("/tags", TagDetectionsMsg(1000, "cam0", ())))
     camera = {"cam0": load_default_world().robot.camera.camera_model()}
@@ -150,12 +150,12 @@ def test_survey_from_messages_keeps_sweeps_by_travel_and_reads_the_mount() -> No
 
 @pytest.mark.slow
 def test_office_survey_with_lidar() -> None:
-    """The demo's survey (seed 2, one anchor): tags within 2 cm, the grid on the walls."""
-    _, report, errors = _built("office", 2, True)
+    """The demo's survey (seed 1, one anchor): tags within 2 cm, the grid on the walls."""
+    _, report, errors = _built("office", 1, True)
     assert errors.position_rms_m < 0.02
-    survey, _ = _survey("office", 2, True)
+    survey, _ = _survey("office", 1, True)
     products = build_products(survey, report)
-    assert occupancy_iou(products.grid, _drive("office", 2).world).iou >= 0.9
+    assert occupancy_iou(products.grid, _drive("office", 1).world).iou >= 0.9
 
 
 @pytest.mark.slow

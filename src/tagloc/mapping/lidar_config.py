@@ -24,6 +24,11 @@ class LidarSurveyConfig(BaseModel):
         Voxel size the keyframe scans are downsampled to before registration.
     max_range_m : float
         Points farther from the scanner are dropped (sparse, and the farther the less precise).
+    min_height_m : float or None
+        Points lower than this above ``base`` (the floor) are left out of the registrations
+        (default None: kept). Measured on the simulated loop corridor, the consecutive
+        registrations overestimate each 0.75 m step by 2.4 mm and pitch by -2.5 mrad with the
+        floor, by 3.1 mm and -3.0 mrad without it: the floor is not what biases them.
     max_correspondence_m : float
         Registration: largest point-to-point distance of a correspondence.
     min_inlier_fraction, max_rmse_m : float
@@ -61,6 +66,7 @@ class LidarSurveyConfig(BaseModel):
     deskew_window_s: float = Field(0.2, gt=0.0)
     voxel_m: float = Field(0.15, gt=0.0)
     max_range_m: float = Field(20.0, gt=0.0)
+    min_height_m: float | None = None
     max_correspondence_m: float = Field(0.5, gt=0.0)
     min_inlier_fraction: float = Field(0.5, ge=0.0, le=1.0)
     max_rmse_m: float = Field(0.1, gt=0.0)

@@ -288,7 +288,12 @@ def keyframe_points(survey: Survey, sweep: int, config: LidarSurveyConfig) -> Fl
     ``max_range_m`` and downsampled to ``voxel_m / 2``; ``(N, 3)`` in the scanner frame."""
     points = deskewed_points(survey, sweep, config.deskew_window_s)
     dist = np.linalg.norm(points, axis=1)
-    return voxel_downsample(points[dist <= config.max_range_m], 0.5 * config.voxel_m)
+    keep = dist <= config.max_range_m
+    if config.min_height_m is not None:  # the floor left out (see LidarSurveyConfig)
+        assert survey.lidar is not None
+        z_base = survey.lidar.T_base_lidar.act(points)[:, 2]
+        keep &= z_base >= config.min_height_m
+    return voxel_downsample(points[keep], 0.5 * config.voxel_m)
 
 
 def deskewed_points(survey: Survey, sweep: int, window_s: float) -> FloatArray:
