@@ -77,11 +77,20 @@ def test_registrations_are_unbiased_and_their_covariance_honest() -> None:
     obs, scans = prepared
     M_true = _truth(drive, obs.keyframe_stamps_ns)
     factors = scans.sequential(obs.T_odom_base.as_matrix().reshape(-1, 4, 4))
-    e = relative_errors(M_true, factors)  # whitened by the factors' own information
-    nees = np.sum(e**2, axis=1) / 6.0
-    # calibrated on the office survey (information_scale, floors): mean NEES ~1
-    assert 0.3 < np.mean(nees) < 3.0
-    assert np.median(np.abs(e), axis=0).max() < 1.5
+    # errors against the truth, normalized by each factor's own standard deviations
+    from tagloc.mapping.initialize import inverse_h as inv
+    from tagloc.mapping.odometry_factors import log_batch as log
+
+    err = log(inv(factors.M_a_b) @ inv(M_true[factors.a]) @ M_true[factors.b])
+    info = np.einsum("nji,njk->nik", factors.sqrt_information, factors.sqrt_information)
+    sigma = np.sqrt(np.diagonal(np.linalg.inv(info), axis1=1, axis2=2))
+    normalized = np.sqrt(np.mean((err / sigma) ** 2, axis=0))
+    # yaw (what bends a map): calibrated, ~1; translation: held loosely on purpose (the 2 cm
+    # floor), so conservative; roll, pitch, z: not over-confident beyond a factor 2
+    assert 0.5 < normalized[5] < 2.0, normalized
+    assert (normalized[:2] < 1.0).all(), normalized
+    assert (normalized < 2.0).all(), normalized
+    assert np.sum(relative_errors(M_true, factors) ** 2, axis=1).mean() / 6.0 < 2.0
     # and far better than the legged odometry between the same keyframes
     M_odo = obs.T_odom_base.as_matrix().reshape(-1, 4, 4)
     from tagloc.mapping.initialize import inverse_h
