@@ -8,7 +8,6 @@ coordinates from their world files), BagSource reading back what was written.
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +23,7 @@ from tagloc.sim.scenarios import (
     ScenarioSource,
     build_scenario,
     localize_scenario,
+    scenario_premap,
 )
 from tagloc.sim.world import load_default_world
 
@@ -100,6 +100,8 @@ def test_the_localizer_ignores_the_lidar() -> None:
     np.testing.assert_array_equal(with_lidar.stamps_ns, without.stamps_ns)
     np.testing.assert_array_equal(with_lidar.T_map_base.as_matrix(), without.T_map_base.as_matrix())
     assert sum(f.accepted for f in with_lidar.fixes) == sum(f.accepted for f in without.fixes) > 0
+    assert with_lidar.metadata["lidar"] == "16 rings x 360 columns, -7 to 52 deg, 360 deg, 10 Hz"
+    assert without.metadata["lidar"] is None and without.metadata["people"] == 0
 
 
 def test_sim_record_writes_the_sweeps_in_arrival_order(tmp_path: Path, short) -> None:  # type: ignore[no-untyped-def]
@@ -138,7 +140,7 @@ def sweep_at(name: str, x: float, **kw: float):  # type: ignore[no-untyped-def]
 
 
 def test_glass_corridor_returns_only_floor_and_end_walls() -> None:
-    scenario, sweep, p = sweep_at("glass_corridor", 20.0)
+    scenario, _, p = sweep_at("glass_corridor", 20.0)
     solid = p[np.abs(p[:, 2]) > 0.1]  # not the floor
     assert len(solid) > 0 and (np.minimum(solid[:, 0], 40.0 - solid[:, 0]) < 0.1).all()
     floor = p[np.abs(p[:, 2]) <= 0.1]
@@ -181,4 +183,16 @@ def test_lidar_unplugged_stream_has_a_20_s_gap() -> None:
     stamps = np.array([m.stamp_ns for _, m in source if isinstance(m, PointCloudMsg)])
     assert ((stamps >= t0 + 30 * S) & (stamps < t0 + 50 * S)).sum() == 0
     assert np.diff(stamps).max() == 20 * S + S // 10
-    assert dataclasses.is_dataclass(fault := SCENARIOS["lidar_unplugged"].faults[0]) and fault
+
+
+def test_a_crowd_scenario_premap_holds_walls_and_floor_but_no_people() -> None:
+    scenario = build_scenario("crowd", 0, 10.0)
+    premap = scenario_premap(scenario, every_m=1.0)
+    walls = scenario.world.walls_in_map()
+    a = np.array([w.start for w in walls])
+    ab = np.array([w.end for w in walls]) - a
+    p = premap[np.abs(premap[:, 2]) > 0.1][:, None, :2]  # off the floor
+    s = np.clip(((p - a) * ab).sum(-1) / (ab**2).sum(-1), 0.0, 1.0)
+    dist = np.linalg.norm(p - (a + s[..., None] * ab), axis=-1).min(axis=1)
+    behind_mirror = p[:, 0, 0] > 37.6  # the cab's mirror walls add phantoms (none in 10 s)
+    assert len(p) > 1000 and (dist[~behind_mirror] < 0.1).all()

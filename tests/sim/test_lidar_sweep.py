@@ -128,8 +128,11 @@ def test_truth_premap_lies_on_the_walls_and_floor_one_point_per_voxel() -> None:
     walls = list(world.walls_in_map())
     assert len(premap) > 2000
     assert surface_distance(premap, walls).max() < 0.1 * np.sqrt(3)
-    keys = np.floor(premap / 0.1).astype(np.int64)
+    keys = np.floor(premap / 0.1 + 0.5).astype(np.int64)  # cubes centred on multiples of 0.1
     assert len(np.unique(keys, axis=0)) == len(premap)
+    # a wall on a round coordinate is one layer of cubes thick
+    near = premap[(np.abs(premap[:, 1] - 8.8) < 0.2) & (premap[:, 2] > 0.2) & (premap[:, 0] > 0.5)]
+    assert np.abs(near[:, 1] - 8.8).max() < 0.05
     # both corridor walls are mapped along the stretch driven and 40 m beyond
     for y in (8.8, 11.2):
         on = premap[np.abs(premap[:, 1] - y) < 0.1]

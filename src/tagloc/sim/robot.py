@@ -260,7 +260,7 @@ class LidarConfig(StrictModel):
         """``(columns,)`` firing time of each column after the sweep start, seconds: the scanner
         turns at a constant rate, so a column fires when the turn reaches its azimuth."""
         turn = (self.azimuths_rad() - self.azimuths_rad()[0]) / (2 * math.pi)
-        return turn * self.period_s()
+        return np.asarray(turn * self.period_s(), dtype=np.float64)
 
 
 class Robot(StrictModel):

@@ -17,7 +17,16 @@ camera_unplugged, odometry_stall, clock_jump_back, duplicated_messages
               stream-level ``faults`` (:mod:`tagloc.sim.faults`, whose table gives the ladder
               walk each must produce): frames lost, odometry stalled, its clock jumping back,
               messages sent twice
+glass_corridor  (world ``glass_corridor``) glass on both sides: the lidar sees floor and end walls
+mirrored_lobby  (world ``mirrored_lobby``) a mirror wall: phantom lidar geometry behind it
+crowd         people walking with the robot hide ``crowd_fraction`` (45 %) of the lidar's beams
+lidar_unplugged  no ``PointCloudMsg`` from 30 s to 50 s (a ``DropMessages`` fault)
+long_corridor  (world ``long_corridor``) 120 m without doors, tags only near the ends
 ============  ===================================================================================
+
+Every scenario streams the lidar when its world's robot has one (all built-in worlds do):
+:class:`ScenarioSource` yields the sweeps of :mod:`tagloc.sim.lidar`, occluded by the world's and
+the scenario's people.
 
 Pure: the same name, seed and duration give the same scenario.
 """
@@ -49,7 +58,7 @@ from tagloc.messages import (
 )
 from tagloc.sim.drive import Drive, simulate_drive
 from tagloc.sim.faults import ClockJump, DropMessages, DuplicateMessages, StreamFault, apply_faults
-from tagloc.sim.lidar import LIDAR_FRAME, LidarSimulator, Sweep
+from tagloc.sim.lidar import LIDAR_FRAME, LidarSimulator, Sweep, premap_from_world
 from tagloc.sim.observations import ObservationConfig, simulate_observations
 from tagloc.sim.people import Person, crowd_around
 from tagloc.sim.trajectory import Trajectory
@@ -66,6 +75,7 @@ __all__ = [
     "build_scenario",
     "localize_scenario",
     "run_scenario",
+    "scenario_premap",
     "tag_map_from_world",
     "truncate_drive",
 ]
@@ -231,6 +241,24 @@ def tag_map_from_world(world: World) -> TagMap:
     )
 
 
+def scenario_premap(
+    scenario: Scenario, *, every_m: float = 0.5, voxel_m: float = 0.1
+) -> npt.NDArray[np.float64]:
+    """The true lidar premap of a scenario, as :func:`tag_map_from_world` is its true tag map:
+    :func:`~tagloc.sim.lidar.premap_from_world` of the world along the drive's ground truth
+    (scans every ``every_m`` of travel, no people, no noise; ``voxel_m`` cubes), ``(N, 3)`` in
+    ``map``, metres.
+
+    Raises
+    ------
+    ValueError
+        If the world's robot has no lidar.
+    """
+    return premap_from_world(
+        scenario.world, scenario.drive.T_map_base, every_m=every_m, voxel_m=voxel_m
+    )
+
+
 def build_scenario(
     name: str,
     seed: int = 0,
@@ -296,7 +324,7 @@ def _crowd(drive: Drive, fraction: float, seed: int) -> tuple[Person, ...]:
     """People walking with the robot's true path (sampled every 0.5 s), times after t0."""
     stamps = np.arange(int(drive.stamps_ns[0]), int(drive.stamps_ns[-1]) + S_NS, S_NS // 2)
     truth = drive.ground_truth_at(stamps)
-    t_s = (stamps - drive.t0_ns) * 1e-9
+    t_s = ((stamps - drive.t0_ns) * 1e-9).astype(np.float64)
     return crowd_around(truth.xy_yaw_map_base, t_s, fraction, seed=seed)
 
 
@@ -530,4 +558,16 @@ def scenario_metadata(scenario: Scenario, source: ScenarioSource) -> dict[str, o
         "duration_s": float(scenario.drive.stamps_ns[-1] - scenario.drive.stamps_ns[0]) / S_NS,
         "n_camera_frames": len(source.frames), "glints_injected": int(glints),
         "world": scenario.world.name, "faults": [f.describe() for f in scenario.faults],
+        "lidar": _lidar_summary(scenario), "people": len(scenario.people),
     }  # fmt: skip
+
+
+def _lidar_summary(scenario: Scenario) -> str | None:
+    lidar = scenario.world.robot.lidar
+    if lidar is None:
+        return None
+    low, high = lidar.vertical_fov_deg
+    return (
+        f"{lidar.rings} rings x {lidar.columns} columns, {low:g} to {high:g} deg, "
+        f"{lidar.horizontal_fov_deg:g} deg, {lidar.rate_hz:g} Hz"
+    )
