@@ -34,6 +34,9 @@ MAX_TAG_EDGE_M = 100.0
 #: Most odometry self-calibration rounds accepted (each is a full optimization of the survey).
 MAX_CALIBRATION_ROUNDS = 10
 
+#: The lidar topic ``--lidar-topic`` defaults to (used only when the bag has it).
+DEFAULT_LIDAR_TOPIC = "/lidar/points"
+
 MapFile = Annotated[Path, typer.Argument(help="Tag map YAML file.", show_default=False)]
 
 
@@ -167,8 +170,14 @@ def _bag_survey(
     rig = None
     if tagslam is not None:
         rig = parse_tagslam(_read_text(tagslam, "tagslam configuration"), str(tagslam))
-    wanted = [*topics, odom_topic, *([lidar_topic, "/tf_static"] if lidar_topic else [])]
+    wanted = [*topics, odom_topic]
     source = BagSource(bag, wanted, corner_order=corner_order, default_family="tag36h11")
+    if lidar_topic == DEFAULT_LIDAR_TOPIC and lidar_topic not in source.bag_topics:
+        lidar_topic = None  # the default topic, and the bag has none: a tags-only survey
+    if lidar_topic is not None:  # an explicit topic the bag lacks is an error (one line)
+        statics = ["/tf_static"] if "/tf_static" in source.bag_topics else []
+        source = BagSource(bag, [*wanted, lidar_topic, *statics], corner_order=corner_order,
+                           default_family="tag36h11")  # fmt: skip
     survey = survey_from_tagslam(
         source,
         topics,
@@ -231,7 +240,10 @@ def map_build(
         bool, typer.Option("--no-lidar", help="Tags and odometry only (no scan matching).")
     ] = False,
     lidar_topic: Annotated[
-        str, typer.Option(help="PointCloud2 topic of the lidar (with --bag).")
+        str,
+        typer.Option(
+            help="PointCloud2 topic of the lidar (with --bag; the default only if the bag has it)."
+        ),
     ] = "/lidar/points",
     premap_format: Annotated[
         str, typer.Option(help="Premap file beside --out: ply (premap.ply) or pcd (premap.pcd).")
