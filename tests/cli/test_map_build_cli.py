@@ -28,7 +28,7 @@ def test_sim_build_writes_map_and_json_report(tmp_path: Path) -> None:
     out, report = tmp_path / "tags.yaml", tmp_path / "qa.json"
     result = run_tagloc(
         "map", "build", "--sim", "--world", str(_short_world(tmp_path)), "--camera-stride", "6",
-        "--out", str(out), "--report", str(report),
+        "--out", str(out), "--report", str(report), "--no-lidar",
     )  # fmt: skip
     assert result.returncode == 0, result.stderr
     assert "reprojection RMS" in result.stdout and f"wrote {out}" in result.stdout
@@ -46,7 +46,7 @@ def test_markdown_report_and_map_check_round_trip(tmp_path: Path) -> None:
     out, report = tmp_path / "tags.yaml", tmp_path / "qa.md"
     result = run_tagloc(
         "map", "build", "--sim", "--world", str(_short_world(tmp_path)), "--camera-stride", "9",
-        "--anchor", "3", "--out", str(out), "--report", str(report),
+        "--anchor", "3", "--out", str(out), "--report", str(report), "--no-lidar",
     )  # fmt: skip
     assert result.returncode == 0, result.stderr
     assert report.read_text().startswith("# Tag map build report")

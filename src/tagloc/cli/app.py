@@ -62,11 +62,15 @@ def demo(
             callback=in_range(ge=0),
         ),
     ] = [],  # noqa: B006
+    no_lidar: Annotated[
+        bool, typer.Option("--no-lidar", help="Survey with tags and odometry only.")
+    ] = False,
 ) -> None:
     """Survey the built-in building, build its tag map, localize a drive against it, report."""
     from tagloc.cli.demo import run_demo
 
-    run_demo(out=out, world_path=world, seed=seed, duration_s=duration, quick=quick, anchors=anchor)
+    run_demo(out=out, world_path=world, seed=seed, duration_s=duration, quick=quick,
+             anchors=anchor, lidar=not no_lidar)  # fmt: skip
 
 
 @world_app.command("check")

@@ -3,9 +3,12 @@
 Steps of :func:`run_demo`:
 
 1. **Survey**: simulate a survey drive (the route with its own odometry seed), build the tag map
-   from its drifting odometry and simulated detections (:mod:`tagloc.mapping`; anchors: the
-   first tag seen, or the ``--anchor`` tags, held at their true poses as if measured by hand),
-   write ``map/tags.yaml`` and its QA report, and score it against the world's true tag poses.
+   from its drifting odometry, simulated detections and lidar sweeps (:mod:`tagloc.mapping`:
+   scan matching; anchors: the first tag seen, or the ``--anchor`` tags, held at their true
+   poses as if measured by hand), write ``map/tags.yaml``, its QA report, the premap
+   ``map/premap.ply`` and the occupancy grid ``map/map.yaml`` + ``map/map.pgm`` (all in
+   ``map``), and score the tags against the world's true poses and the grid against its walls.
+   ``--no-lidar``: tags and odometry only.
 2. **Localize**: simulate a second drive (the default scenario, legged odometry) and localize it
    through the same message stream a bag gives, against the *built* map; for reference, also
    against the true (surveyed-by-hand) map.
@@ -41,7 +44,8 @@ if TYPE_CHECKING:
 
 #: The files :func:`run_demo` may write into its output directory.
 DEMO_FILES = (
-    "world.yaml", "map/tags.yaml", "map/map_report.md", "drive.png",
+    "world.yaml", "map/tags.yaml", "map/map_report.md", "map/premap.ply", "map/map.yaml",
+    "map/map.pgm", "drive.png",
     *(f"{run}/{name}" for run in ("localize", "localize_true_map") for name in REPORT_FILES),
 )  # fmt: skip
 #: Survey drives use every n-th camera frame (30 Hz frames overlap; 10 Hz keeps the build short).
@@ -58,6 +62,7 @@ class SurveyResult:
     distance_m: float
     seconds: float
     anchors: tuple[int, ...]
+    grid_iou: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -73,27 +78,42 @@ class DemoResult:
 
 
 def survey_and_build(
-    world: World, seed: int, out: Path, anchors: Sequence[int] | None = None
+    world: World,
+    seed: int,
+    out: Path,
+    anchors: Sequence[int] | None = None,
+    lidar: bool = True,
 ) -> SurveyResult:
     """Simulate a survey drive with odometry seed ``seed``, build its tag map (``anchors``: tag
-    ids held at their true poses; default the first tag seen), write ``out/tags.yaml`` and
-    ``out/map_report.md``, and score the map against ``world``."""
-    from tagloc.fileutil import atomic_write_text
+    ids held at their true poses; default the first tag seen; ``lidar``: with scan matching),
+    write ``out/tags.yaml``, ``out/map_report.md`` and with lidar ``out/premap.ply`` and
+    ``out/map.yaml`` + ``out/map.pgm``, and score the map against ``world``."""
+    from tagloc.eval.occupancy import occupancy_iou
+    from tagloc.io.survey_files import write_survey_outputs
+    from tagloc.mapping import build_tag_map
+    from tagloc.mapping.products import build_products
     from tagloc.sim import ObservationConfig, simulate_drive
-    from tagloc.sim.survey import build_map_from_drive, map_errors
-    from tagloc.tags.tagmap import save_tag_map
+    from tagloc.sim.survey import map_errors, sim_build_config, survey_and_anchors
 
     start = time.perf_counter()
     drive = simulate_drive(world, seed=seed)
-    tag_map, report = build_map_from_drive(
-        drive,
-        ObservationConfig(seed=seed),
-        anchors=list(anchors) if anchors else None,
-        camera_stride=SURVEY_CAMERA_STRIDE,
-    )
-    out.mkdir(parents=True, exist_ok=True)
-    save_tag_map(tag_map, out / "tags.yaml")
-    atomic_write_text(out / "map_report.md", report.to_markdown())
+    observation_config = ObservationConfig(seed=seed)
+    survey, T_map_anchor = survey_and_anchors(
+        drive, observation_config, list(anchors) if anchors else None, SURVEY_CAMERA_STRIDE,
+        lidar=lidar,
+    )  # fmt: skip
+    config = sim_build_config(drive, observation_config)
+    tag_map, report = build_tag_map(survey, T_map_anchor, config)
+    texts = {out / "tags.yaml": tag_map.to_yaml_text(), out / "map_report.md": report.to_markdown()}
+    iou = None
+    if lidar:
+        built = build_products(survey, report, lidar_config=config.lidar)
+        write_survey_outputs(
+            texts, (out / "premap.ply", built.premap_map, "ply"), (out / "map.yaml", built.grid)
+        )
+        iou = occupancy_iou(built.grid, world).iou
+    else:
+        write_survey_outputs(texts)
     distance = float(drive.distance_m[-1] - drive.distance_m[0])
     return SurveyResult(
         tag_map,
@@ -102,6 +122,7 @@ def survey_and_build(
         distance,
         time.perf_counter() - start,
         tuple(e.id for e in tag_map.anchors),
+        iou,
     )
 
 
@@ -112,6 +133,7 @@ def run_demo(
     duration_s: float | None = None,
     quick: bool = False,
     anchors: Sequence[int] = (),
+    lidar: bool = True,
 ) -> DemoResult:
     """Survey, localize and evaluate (module docstring); every output lands in ``out``.
 
@@ -145,8 +167,10 @@ def run_demo(
     survey = None
     if not quick:
         with console.status("surveying: simulated survey drive, factor-graph map build"):
-            survey = survey_and_build(world, seed + 1, out / "map", anchors)
+            survey = survey_and_build(world, seed + 1, out / "map", anchors, lidar)
         files += [out / "map" / "tags.yaml", out / "map" / "map_report.md"]
+        if lidar:
+            files += [out / "map" / "premap.ply", out / "map" / "map.yaml"]
     # 2. localize the drive against the built map (and the true map for reference)
     source = ScenarioSource(scenario)  # the drive's detections, shared by both runs
     with console.status("localizing against the true tag map"):
@@ -213,6 +237,8 @@ def _table(
             ),
             ("survey: build time", f"{survey.seconds:.1f} s"),
         ]  # fmt: skip
+        if survey.grid_iou is not None:
+            rows.append(("survey: occupancy grid vs walls (IoU)", f"{survey.grid_iou:.3f}"))
     for name, s in summaries.items():
         fused = s.estimators["fused"]
         reliability = fused.reliability.fraction if fused.reliability else math.nan

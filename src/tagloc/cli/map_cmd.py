@@ -2,6 +2,9 @@
 
 - ``tagloc map check tags.yaml`` prints ``tags.yaml: ok: <summary>`` (tags per family, tags per
   frame, anchors), or one error line naming file, entry and field, and exits 1.
+- ``tagloc map build --out tags.yaml ...`` builds a tag map from a survey; with lidar sweeps it
+  also writes ``premap.ply`` (or ``.pcd``) and ``map.yaml`` + ``map.pgm`` beside it, all in
+  ``map``, all or none (:func:`tagloc.io.survey_files.write_survey_outputs`).
 - ``tagloc map diff old.yaml new.yaml`` prints one line per change (see
   :mod:`tagloc.tags.tagmap_diff`), or ``no differences``. It exits 0 either way; with
   ``--exit-code`` it exits 1 when there are differences, like ``git diff --exit-code`` (an
@@ -12,13 +15,15 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Literal, cast
 
 import typer
 
 from tagloc.cli.options import OptionError, in_range, positive_int, seed_range
 
 if TYPE_CHECKING:
+    from collections.abc import Mapping
+
     from tagloc.geometry import SE3
     from tagloc.mapping import MapBuildConfig, Survey
     from tagloc.mapping.anchors import Anchor
@@ -34,6 +39,9 @@ map_app = typer.Typer(
 MAX_TAG_EDGE_M = 100.0
 #: Most odometry self-calibration rounds accepted (each is a full optimization of the survey).
 MAX_CALIBRATION_ROUNDS = 10
+
+#: The lidar topic ``--lidar-topic`` defaults to (used only when the bag has it).
+DEFAULT_LIDAR_TOPIC = "/lidar/points"
 
 MapFile = Annotated[Path, typer.Argument(help="Tag map YAML file.", show_default=False)]
 
@@ -215,7 +223,9 @@ def _bag_survey(
     corner_order: str,
     tag_size: float | None,
     sizes: dict[int, float],
+    lidar_topic: str | None,
 ) -> tuple[Survey, dict[int, SE3 | Anchor]]:
+
     from tagloc.geometry import SE3
     from tagloc.io import BagSource, load_kalibr_cameras
     from tagloc.mapping import MappingError
@@ -239,9 +249,14 @@ def _bag_survey(
     rig = None
     if tagslam is not None:
         rig = parse_tagslam(_read_text(tagslam, "tagslam configuration"), str(tagslam))
-    source = BagSource(
-        bag, [*topics, odom_topic], corner_order=corner_order, default_family="tag36h11"
-    )
+    wanted = [*topics, odom_topic]
+    source = BagSource(bag, wanted, corner_order=corner_order, default_family="tag36h11")
+    if lidar_topic == DEFAULT_LIDAR_TOPIC and lidar_topic not in source.bag_topics:
+        lidar_topic = None  # the default topic, and the bag has none: a tags-only survey
+    if lidar_topic is not None:  # an explicit topic the bag lacks is an error (one line)
+        statics = ["/tf_static"] if "/tf_static" in source.bag_topics else []
+        source = BagSource(bag, [*wanted, lidar_topic, *statics], corner_order=corner_order,
+                           default_family="tag36h11")  # fmt: skip
     survey = survey_from_tagslam(
         source,
         topics,
@@ -252,6 +267,7 @@ def _bag_survey(
         tag_sizes=sizes,
         default_tag_size=tag_size,
         source=str(bag),
+        lidar_topic=lidar_topic,
     )
     return survey, dict(rig.anchors) if rig else {}
 
@@ -269,6 +285,9 @@ def _measured_anchors(tag_map: TagMap) -> dict[int, SE3 | Anchor]:
             else Anchor(e.T_frame_tag(), sigma.position_m, sigma.rotation_deg)
         )
     return out
+def _product_paths(out: Path, premap_format: str) -> tuple[Path, Path, Path]:
+    """``premap.<format>``, ``map.yaml`` and ``map.pgm`` beside the tag map."""
+    return out.parent / f"premap.{premap_format}", out.parent / "map.yaml", out.parent / "map.pgm"
 
 
 @map_app.command("build")
@@ -309,6 +328,18 @@ def map_build(
     ] = None,
     size: Annotated[list[str], typer.Option(help="ID=EDGE_M per tag (repeat).")] = [],  # noqa: B006
     report: Annotated[Path | None, typer.Option(help="QA report file (.json or .md).")] = None,
+    no_lidar: Annotated[
+        bool, typer.Option("--no-lidar", help="Tags and odometry only (no scan matching).")
+    ] = False,
+    lidar_topic: Annotated[
+        str,
+        typer.Option(
+            help="PointCloud2 topic of the lidar (with --bag; the default only if the bag has it)."
+        ),
+    ] = "/lidar/points",
+    premap_format: Annotated[
+        str, typer.Option(help="Premap file beside --out: ply (premap.ply) or pcd (premap.pcd).")
+    ] = "ply",
     calibrate_odometry: Annotated[
         int | None,
         typer.Option(
@@ -352,21 +383,30 @@ def map_build(
         ),
     ] = [],  # noqa: B006
 ) -> None:
-    """Build a tag map from a survey drive (a bag, or --sim) and print its QA report."""
+    """Build a tag map from a survey drive (a bag, or --sim) and print its QA report; with lidar
+    sweeps (and no --no-lidar) also the premap and the occupancy grid beside --out."""
     from rich.progress import Progress
 
-    from tagloc.fileutil import atomic_write_texts, check_outputs
+    from tagloc.fileutil import check_outputs
+    from tagloc.io.survey_files import write_survey_outputs
     from tagloc.mapping import MapBuildConfig, MappingError, build_tag_map
     from tagloc.mapping.exclude import exclude_observations
-    from tagloc.sim.survey import build_map_from_drive, sim_build_config
+    from tagloc.mapping.products import build_products
+    from tagloc.sim.survey import sim_build_config, survey_and_anchors
     from tagloc.tags.tagmap import load_tag_map
 
     if sim == (bag is not None):
         raise MappingError("give exactly one of --bag PATH or --sim")
     if sim and anchors is not None:
         raise MappingError("--anchors is for --bag (with --sim, give --anchor ID: true poses)")
+    if premap_format not in ("ply", "pcd"):
+        raise OptionError(f"--premap-format {premap_format!r}: expected ply or pcd")
+    fmt = cast(Literal["ply", "pcd"], premap_format)
+    premap_path, grid_yaml, grid_pgm = _product_paths(out, fmt)
+    products = {} if no_lidar else {"premap": premap_path, "map.yaml": grid_yaml,
+                                    "map.pgm": grid_pgm}  # fmt: skip
     check_outputs(
-        {"--out": out, "--report": report, "--export-graph": export_graph},
+        {"--out": out, "--report": report, "--export-graph": export_graph, **products},
         inputs={"--bag": bag, "--world": world, "--cameras": cameras,
                 "--camera-poses": camera_poses, "--tagslam": tagslam, "--anchors": anchors,
                 "--config": config_file},
@@ -387,6 +427,7 @@ def map_build(
         def progress(stage: str, done: int, total: int) -> None:
             bar.update(task, description=stage, completed=done / max(total, 1))
 
+        T_map_anchor: Mapping[int, SE3 | Anchor]
         if sim:
             from tagloc.sim import ObservationConfig, load_default_world, load_world, simulate_drive
 
@@ -394,14 +435,8 @@ def map_build(
             drive = simulate_drive(sim_world, seed=seed)
             observation_config = ObservationConfig(seed=seed)
             config = _build_config(config_file, sim_build_config(drive, observation_config), rounds)
-            tag_map, qa = build_map_from_drive(
-                drive,
-                observation_config,
-                anchors=anchor or None,
-                config=config,
-                camera_stride=camera_stride,
-                progress=progress,
-                exclusions=exclusions,
+            survey, T_map_anchor = survey_and_anchors(
+                drive, observation_config, anchor or None, camera_stride, lidar=not no_lidar
             )
         else:
             from tagloc.geometry import SE3
@@ -419,6 +454,7 @@ def map_build(
                 corner_order,
                 tag_size,
                 sizes,
+                None if no_lidar else lidar_topic,
             )
             known.update(known_anchors)
             chosen = anchor or sorted(known)
@@ -430,13 +466,27 @@ def map_build(
             # one anchor without a known pose defines the map frame (identity pose)
             T_map_anchor = {i: known.get(i, SE3.identity()) for i in chosen}
             config = _build_config(config_file, MapBuildConfig(), rounds)
-            survey = exclude_observations(survey, exclusions)
-            tag_map, qa = build_tag_map(survey, T_map_anchor, config, progress)
+        survey = exclude_observations(survey, exclusions)
+        tag_map, qa = build_tag_map(survey, T_map_anchor, config, progress)
+        built = None
+        if survey.lidar is not None and not no_lidar:
+            bar.update(task, description="premap and occupancy grid")
+            built = build_products(survey, qa, lidar_config=config.lidar)
     files = {out: tag_map.to_yaml_text()}
     if report is not None:
         files[report] = qa.to_json() if report.suffix == ".json" else qa.to_markdown()
     if export_graph is not None:
         files[export_graph] = qa.graph_jsonl()
-    atomic_write_texts(files)  # both or neither
+    if built is None:
+        write_survey_outputs(files)  # all or none
+    else:
+        write_survey_outputs(files, (premap_path, built.premap_map, fmt), (grid_yaml, built.grid))
     typer.echo("\n".join(qa.summary_lines()))
     typer.echo(f"wrote {out} ({tag_map.summary()})")
+    if built is not None:
+        height, width = built.grid.shape
+        typer.echo(
+            f"wrote {premap_path} ({len(built.premap_map)} points from {built.scans} scans), "
+            f"{grid_yaml} + {grid_pgm.name} ({width} x {height} cells of "
+            f"{built.grid.resolution_m:g} m), in frame map"
+        )

@@ -8,6 +8,10 @@
 - :class:`MapBuildConfig`: the tunables (:class:`GravityConfig`: roll and pitch priors from a
   gravity-aligned odometry); :class:`Anchor`: a measured anchor with its sigmas;
   :func:`exclude_observations`: leave detections out before building again.
+- With lidar sweeps in the survey (:class:`SurveyScans`): scan-matching factors
+  (:mod:`tagloc.mapping.lidar_survey`, :mod:`tagloc.mapping.scan_factors`; tunables
+  :class:`LidarSurveyConfig`) and the premap and occupancy grid at the optimized poses
+  (:func:`tagloc.mapping.products.build_products`).
 
 Errors are :class:`MappingError`.
 """
@@ -16,6 +20,7 @@ from tagloc.mapping.anchors import Anchor
 from tagloc.mapping.builder import build_tag_map
 from tagloc.mapping.config import GravityConfig, MapBuildConfig, OdometryNoise
 from tagloc.mapping.exclude import Exclusion, exclude_observations
+from tagloc.mapping.lidar_config import LidarSurveyConfig
 from tagloc.mapping.report import BuildReport, TagQA
 from tagloc.mapping.stream_survey import (
     RigConfig,
@@ -26,6 +31,7 @@ from tagloc.mapping.stream_survey import (
     survey_from_tagslam,
 )
 from tagloc.mapping.survey import CameraFrame, MappingError, Survey, only_cameras
+from tagloc.mapping.survey_scans import SurveyScans
 
 __all__ = [
     "Anchor",
@@ -33,11 +39,13 @@ __all__ = [
     "CameraFrame",
     "Exclusion",
     "GravityConfig",
+    "LidarSurveyConfig",
     "MapBuildConfig",
     "MappingError",
     "OdometryNoise",
     "RigConfig",
     "Survey",
+    "SurveyScans",
     "TagQA",
     "build_tag_map",
     "corner_rotation_by_gravity",

@@ -3,12 +3,16 @@
 :func:`build_tag_map` reads as its steps:
 
 1. PnP on every detection, keyframes at the frame stamps (:mod:`tagloc.mapping.observations`);
+   with lidar sweeps, also keyframes at a sweep every ``lidar.keyframe_distance_m``, their
+   consecutive scans registered, and the odometry corrected by them for the initialization
+   (:mod:`tagloc.mapping.lidar_survey`);
 2. initial keyframe and tag poses, IPPE branch per observation (:mod:`tagloc.mapping.initialize`);
 3. pose-factor rounds (:mod:`tagloc.mapping.graph`, GTSAM Levenberg-Marquardt): optimize,
    re-pick each observation's branch at the optimum, again while branches change; optionally
-   calibrate the odometry (:mod:`tagloc.mapping.calibration`) between rounds;
+   calibrate the odometry (:mod:`tagloc.mapping.calibration`) between rounds; with lidar, the
+   scan-matching factors in every round and loop closures found at the first optimum;
 4. corner refinement (:mod:`tagloc.mapping.refine`: Gauss-Newton on the corners, the odometry
-   with its calibration and the anchors), then the tilt test of every tag
+   with its calibration, the anchors and the scan factors), then the tilt test of every tag
    (:mod:`tagloc.mapping.flips`) and, if a tag flipped, the refinement again;
 5. marginal covariance of every tag; QA (:mod:`tagloc.mapping.report`, with uncertainty flags and
    advice: :mod:`tagloc.mapping.map_qa`) and the TagMap; every factor at the solution as records
@@ -69,12 +73,12 @@ from tagloc.mapping.initialize import (
     initialize_tags,
     inverse_h,
 )
+from tagloc.mapping.lidar_survey import prepare_lidar, scan_odometry
 from tagloc.mapping.map_qa import graph_records, map_and_report
 from tagloc.mapping.observations import Observations, collect_observations
 from tagloc.mapping.refine import Priors, State, refine_and_test_tilts
-from tagloc.mapping.report import (
-    BuildReport,
-)
+from tagloc.mapping.report import BuildReport
+from tagloc.mapping.scan_factors import RelativePoseFactors
 from tagloc.mapping.survey import MappingError, Survey, TagKey
 from tagloc.tags.tagmap import DEFAULT_FAMILY, TagMap
 
@@ -112,6 +116,7 @@ def _graph_input(
     M_map_base: np.ndarray,
     M_map_tag: Mapping[int, np.ndarray],
     priors: Priors,
+    relative: RelativePoseFactors | None = None,
 ) -> GraphInput:
     rows = np.arange(len(obs))
     return GraphInput(
@@ -125,6 +130,7 @@ def _graph_input(
         M_map_tag_init=M_map_tag,
         anchor_sigmas=priors.anchor_sigmas,
         up_base=priors.up_base,
+        relative=relative,
     )
 
 
@@ -169,12 +175,25 @@ def build_tag_map(
         survey, config.pnp_noise, config.max_range_m, pnp_progress, config.observation_covariance
     )
     timings["observations"] = time.perf_counter() - t_start
+    # 1b. lidar keyframes: pose variables at sweeps, their scans prepared for registration
+    t = time.perf_counter()
+    lidar = prepare_lidar(survey, obs, config.lidar)
+    relative: RelativePoseFactors | None = None
+    obs_init = obs
+    if lidar is not None:
+        obs, scans = lidar
+        timings["lidar_keyframes"] = time.perf_counter() - t
+        # consecutive registrations from the odometry; the scan-corrected odometry initializes
+        t = time.perf_counter()
+        relative = scans.sequential(obs.T_odom_base.as_matrix().reshape(-1, 4, 4))
+        obs_init = replace(obs, T_odom_base=scan_odometry(obs, relative, config))
+        timings["scan_matching"] = time.perf_counter() - t
     # 2. initial values
     t = time.perf_counter()
     M_anchor, anchor_sigmas = _anchor_indices(anchors, obs, survey.source, config)
     up_base = up_in_base(obs.T_odom_base.as_matrix().reshape(-1, 4, 4))
     priors = Priors(anchor_sigmas, up_base if config.gravity.aligned_odometry else None)
-    M_map_base = initialize_keyframes(obs, M_anchor, config.max_ambiguity_for_init)
+    M_map_base = initialize_keyframes(obs_init, M_anchor, config.max_ambiguity_for_init)
     M_map_tag = initialize_tags(obs, M_map_base, M_anchor)
     branch = choose_branches(obs, M_map_base, M_map_tag)
     timings["initialize"] = time.perf_counter() - t
@@ -186,13 +205,16 @@ def build_tag_map(
         M_map_base_odometry = _odometry_in_map(obs, M_map_base)
         M_odom_raw = obs.T_odom_base.as_matrix().reshape(-1, 4, 4)
         M_odom_base, calibration = M_odom_raw, OdometryCalibration.identity()
+        scan_s = 0.0
         solution: GraphSolution | None = None
         iterations, optimize_s, error_initial = 0, 0.0, float("nan")
         n_rounds = config.rounds + config.calibration_rounds
         for round_ in range(n_rounds):
             if progress is not None:
                 progress("optimize", round_, n_rounds)
-            data = _graph_input(obs, M_odom_base, branch, M_anchor, M_map_base, M_map_tag, priors)
+            data = _graph_input(
+                obs, M_odom_base, branch, M_anchor, M_map_base, M_map_tag, priors, relative
+            )
             solution = solve_graph(data, config)
             iterations += solution.iterations
             optimize_s += solution.optimize_s
@@ -202,6 +224,12 @@ def build_tag_map(
             changed = int((new_branch != branch).sum())
             branch = new_branch
             calibrate = round_ + 1 >= config.rounds and round_ + 1 < n_rounds
+            closed = 0
+            if lidar is not None and relative is not None and round_ == 0:
+                t_scan = time.perf_counter()  # loop closures at the first estimate
+                loops = scans.loops(M_map_base)
+                relative, closed = relative.concat(loops), len(loops)
+                scan_s += time.perf_counter() - t_scan
             logger.info(
                 "round %d: %d iterations, %d branches changed", round_, solution.iterations, changed
             )
@@ -209,10 +237,11 @@ def build_tag_map(
                 calibration = fit_calibration(M_odom_raw, M_map_base)
                 M_odom_base = apply_calibration(M_odom_raw, calibration)
                 logger.info("odometry calibration: %s", calibration)
-            elif not changed:
+            elif not changed and not closed:
                 break
         assert solution is not None
-        timings["pose_rounds"] = time.perf_counter() - t
+        timings["pose_rounds"] = time.perf_counter() - t - scan_s
+        timings["scan_matching"] = timings.get("scan_matching", 0.0) + scan_s
         t_refine = time.perf_counter()
         ambiguous: list[int] = []
         held = held_tags(M_anchor, obs.tag, M_map_tag)
@@ -228,6 +257,7 @@ def build_tag_map(
                 survey.T_base_cam,
                 config,
                 priors,
+                relative,
             )
             iterations += solution.iterations
             optimize_s += solution.optimize_s
@@ -244,8 +274,9 @@ def build_tag_map(
             solution = marginal_covariances(solution)
         elif config.compute_covariance:
             data = _graph_input(
-                obs, M_odom_base, branch, M_anchor, solution.M_map_base, solution.M_map_tag, priors
-            )
+                obs, M_odom_base, branch, M_anchor, solution.M_map_base, solution.M_map_tag,
+                priors, relative,
+            )  # fmt: skip
             graph, values = build_graph(data, config)
             at = replace(solution, graph=graph, values=values)
             solution = replace(solution, cov_map_tag=marginal_covariances(at).cov_map_tag)
@@ -266,6 +297,8 @@ def build_tag_map(
     object.__setattr__(report, "timings_s", timings)
     object.__setattr__(report, "iterations", iterations)
     object.__setattr__(report, "error_initial", error_initial)
+    if lidar is not None:
+        object.__setattr__(report, "scan_matching", scans.stats.as_dict())
     return tag_map, report
 
 

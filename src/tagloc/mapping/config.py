@@ -6,6 +6,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from tagloc.mapping.lidar_config import LidarSurveyConfig
 from tagloc.tags.covariance import NoiseModel
 
 
@@ -128,6 +129,8 @@ class MapBuildConfig(BaseModel):
     calibration_sigma : float
         Standard deviation of the zero-mean prior on each calibration number (fractions for
         the scales, rad/m for the yaw bias).
+    lidar : LidarSurveyConfig
+        Scan-matching factors and map products of a survey with lidar sweeps.
     """
 
     model_config = ConfigDict(extra="forbid", frozen=True)
@@ -154,3 +157,4 @@ class MapBuildConfig(BaseModel):
     calibration_sigma: float = Field(0.1, gt=0.0)
     gravity: GravityConfig = GravityConfig()
     uncertainty_flag_m: float = Field(0.05, gt=0.0)
+    lidar: LidarSurveyConfig = LidarSurveyConfig()

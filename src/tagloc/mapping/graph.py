@@ -13,6 +13,8 @@ Variables: ``x_k`` = ``T_map_base`` of keyframe ``k``; ``l_j`` = ``T_map_tag`` o
 - ``PriorFactorPose3`` on anchor tags (each with its own sigmas, :mod:`tagloc.mapping.anchors`);
 - with a gravity-aligned odometry, an attitude prior on every keyframe
   (:mod:`tagloc.mapping.gravity`).
+- scan-matching ``BetweenFactorPose3(x_a, x_b, T_base_a_base_b)`` from lidar registrations, when
+  the survey has scans (:mod:`tagloc.mapping.scan_factors`).
 
 Solved with Levenberg-Marquardt; tag covariances from ``gtsam.Marginals``.
 """
@@ -32,6 +34,7 @@ from tagloc.mapping.config import MapBuildConfig, OdometryNoise
 from tagloc.mapping.gravity import add_gravity_factors
 from tagloc.mapping.gtsam_bridge import PERM, cov_from_gtsam, diagonal_sigmas, solver_errors
 from tagloc.mapping.initialize import inverse_h, rotation_angle
+from tagloc.mapping.scan_factors import RelativePoseFactors, add_relative_factors
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -71,6 +74,8 @@ class GraphInput:
     up_base : (K, 3) float or None
         Gravity "up" in each keyframe's ``base`` (:mod:`tagloc.mapping.gravity`): one attitude
         prior per keyframe; None: no gravity priors.
+    relative : RelativePoseFactors, optional
+        Scan-matching factors between keyframes (:mod:`tagloc.mapping.scan_factors`).
     """
 
     M_odom_base: FloatArray
@@ -83,6 +88,7 @@ class GraphInput:
     M_map_tag_init: Mapping[int, FloatArray]
     anchor_sigmas: Mapping[int, FloatArray] = field(default_factory=dict)
     up_base: FloatArray | None = None
+    relative: RelativePoseFactors | None = None
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -199,6 +205,8 @@ def build_graph(
     for k, j, M, cov in zip(data.keyframe, data.tag, data.M_base_tag, covs, strict=True):
         model = gtsam.noiseModel.Robust.Create(kernel, gtsam.noiseModel.Gaussian.Covariance(cov))
         graph.add(gtsam.BetweenFactorPose3(X(int(k)), L(int(j)), _pose3(M), model))
+    if data.relative is not None:  # lidar scan matching
+        add_relative_factors(graph, data.relative, X)
     return graph, values
 
 

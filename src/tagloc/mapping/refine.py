@@ -6,7 +6,8 @@ Starting from the pose-factor solution, each round
    (:mod:`tagloc.mapping.corner_graph`, robust kernel as IRLS weights, false detections left
    out), the odometry steps with the calibration vector ``c`` as a variable
    (:mod:`tagloc.mapping.odometry_factors`), priors on the anchors (:class:`Priors`: each with its
-   sigmas), gravity priors (:mod:`tagloc.mapping.gravity`) and a broad prior on ``c``;
+   sigmas), gravity priors (:mod:`tagloc.mapping.gravity`), a broad prior on ``c``, and the
+   lidar scan-matching factors if any (:mod:`tagloc.mapping.scan_factors`);
 2. solves the sparse normal equations with GTSAM (``GaussianFactorGraph.optimize``: COLAMD
    ordering, multifrontal Cholesky);
 3. retracts (``T Exp(delta)``) with a backtracking line search on the robust objective, so it
@@ -52,6 +53,7 @@ from tagloc.mapping.odometry_factors import (
     odometry_residuals,
     prior_residuals,
 )
+from tagloc.mapping.scan_factors import RelativePoseFactors, linearize_relative, relative_cost
 
 logger = logging.getLogger(__name__)
 FloatArray = npt.NDArray[np.float64]
@@ -95,9 +97,11 @@ class _Problem:
         T_base_cam: Mapping[str, SE3],
         config: MapBuildConfig,
         priors: Priors | None = None,
+        relative: RelativePoseFactors | None = None,
     ) -> None:
         self.obs, self.held, self.config = obs, dict(held), config
         priors = priors or Priors()
+        self.relative = relative
         self.calibrate = config.joint_calibration
         self.cameras, self.T_base_cam = cameras, T_base_cam
         self.step_raw = inverse_h(M_odom_raw[:-1]) @ M_odom_raw[1:]
@@ -145,6 +149,8 @@ class _Problem:
             total += 0.5 * float(np.sum(g**2))
         if self.calibrate:
             total += 0.5 * float(np.sum((state.c / self.config.calibration_sigma) ** 2))
+        if self.relative is not None:
+            total += relative_cost(state.M_map_base, self.relative)
         return total
 
     def linearize(self, state: State) -> tuple[gtsam.GaussianFactorGraph, FloatArray]:
@@ -180,6 +186,11 @@ class _Problem:
             unit3 = gtsam.noiseModel.Unit.Create(3)
             for k in range(len(g)):
                 graph.add(gtsam.JacobianFactor(X(k), A_g[k], -g[k], unit3))
+        if self.relative is not None:  # lidar scan matching, IRLS-weighted
+            e_rel, A_a, A_b = linearize_relative(state.M_map_base, self.relative)
+            for a, b, e_i, A_ai, A_bi in zip(self.relative.a, self.relative.b, e_rel, A_a, A_b,
+                                             strict=True):  # fmt: skip
+                graph.add(gtsam.JacobianFactor(X(int(a)), A_ai, X(int(b)), A_bi, -e_i, unit6))
         if self.calibrate:
             s = self.config.calibration_sigma
             graph.add(gtsam.JacobianFactor(
@@ -220,6 +231,7 @@ def refine_with_corners(
     T_base_cam: Mapping[str, SE3],
     config: MapBuildConfig,
     priors: Priors | None = None,
+    relative: RelativePoseFactors | None = None,
 ) -> tuple[GraphSolution, State]:
     """Refine ``start`` with the corners (module docstring).
 
@@ -238,6 +250,8 @@ def refine_with_corners(
         at ``start.c``).
     priors : Priors, optional
         Anchor sigmas and gravity (default: configuration sigmas, no gravity).
+    relative : RelativePoseFactors, optional
+        Lidar scan-matching factors between keyframes.
 
     Returns
     -------
@@ -245,7 +259,7 @@ def refine_with_corners(
         ``mahalanobis`` is the corners' whitened norm per observation; ``linear`` the last
         linearization (for :func:`tagloc.mapping.graph.marginal_covariances`).
     """
-    problem = _Problem(obs, M_odom_raw, held, cameras, T_base_cam, config, priors)
+    problem = _Problem(obs, M_odom_raw, held, cameras, T_base_cam, config, priors, relative)
     calibrate = problem.calibrate
     state, cost = start, problem.objective(start)
     cost_initial, rounds, solve_s = cost, 0, 0.0
@@ -299,6 +313,7 @@ def refine_and_test_tilts(
     T_base_cam: Mapping[str, SE3],
     config: MapBuildConfig,
     priors: Priors | None = None,
+    relative: RelativePoseFactors | None = None,
 ) -> tuple[GraphSolution, State, list[int]]:
     """Refine, test every tag's tilt (:mod:`tagloc.mapping.flips`), refine again while tags
     flip (at most :data:`MAX_FLIP_PASSES` tests).
@@ -310,7 +325,7 @@ def refine_and_test_tilts(
     ambiguous: list[int] = []
     for pass_ in range(MAX_FLIP_PASSES + 1):
         solution, state = refine_with_corners(
-            obs, M_odom_raw, state, held, cameras, T_base_cam, config, priors
+            obs, M_odom_raw, state, held, cameras, T_base_cam, config, priors, relative
         )
         rounds += solution.iterations
         solve_s += solution.optimize_s

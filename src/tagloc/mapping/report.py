@@ -69,7 +69,8 @@ class BuildReport:
     error_initial, error_final : float
     timings_s : dict of str to float
         ``observations`` (PnP), ``initialize``, ``optimize`` (GTSAM LM, all rounds),
-        ``graph`` (building graphs and reading results), ``covariance``, ``report``, ``total``.
+        ``graph`` (building graphs and reading results), ``covariance``, ``report``, ``total``;
+        with lidar ``lidar_keyframes`` (de-skew, targets) and ``scan_matching`` (registrations).
     tilt_deg : float
         Angle between the map's z and the odometry frame's z carried into ``map`` by the
         optimized keyframes (:func:`tagloc.mapping.gravity.map_tilt_deg`): the map's tilt against
@@ -81,6 +82,8 @@ class BuildReport:
     factors : tuple of dict
         Every factor with its residual at the solution, header first
         (:mod:`tagloc.mapping.graph_export`); :meth:`graph_jsonl` writes them.
+    scan_matching : dict of str to int
+        With lidar: keyframe scans, consecutive and loop registrations accepted and rejected.
     """
 
     source: str
@@ -103,6 +106,7 @@ class BuildReport:
     gravity_priors: bool = False
     uncertainty_flag_m: float = float("nan")
     factors: tuple[dict[str, Any], ...] = ()
+    scan_matching: dict[str, int] = field(default_factory=dict)
 
     @property
     def uncertain_tags(self) -> tuple[int, ...]:
@@ -140,6 +144,7 @@ class BuildReport:
             "error_initial": self.error_initial,
             "error_final": self.error_final,
             "timings_s": {k: round(v, 4) for k, v in self.timings_s.items()},
+            "scan_matching": dict(self.scan_matching),
             "tags": [
                 {
                     "id": t.tag_id,
@@ -192,6 +197,18 @@ class BuildReport:
             f"time {t.get('total', 0.0):.2f} s (PnP {t.get('observations', 0.0):.2f} s, "
             f"optimize {t.get('optimize', 0.0):.2f} s, "
             f"covariance {t.get('covariance', 0.0):.2f} s)",
+            *self._scan_lines(),
+        ]
+
+    def _scan_lines(self) -> list[str]:
+        m = self.scan_matching
+        if not m:
+            return []
+        return [
+            f"lidar: {m['keyframes']} keyframe scans; {m['sequential']} consecutive registrations "
+            f"({m['sequential_rejected']} rejected), {m['loops']} loop closures "
+            f"({m['loops_rejected']} rejected); scan matching "
+            f"{self.timings_s.get('scan_matching', 0.0):.1f} s"
         ]
 
     def to_markdown(self) -> str:

@@ -29,7 +29,8 @@ from tagloc.config import clip_message, parse_yaml_mapping
 from tagloc.errors import TaglocError
 from tagloc.geometry import SE3
 from tagloc.mapping.survey import CameraFrame, MappingError, Survey, TagKey
-from tagloc.messages import Message, OdometryMsg, TagDetectionsMsg
+from tagloc.mapping.survey_scans import SurveyScans
+from tagloc.messages import Message, OdometryMsg, PointCloudMsg, TagDetectionsMsg, TransformMsg
 from tagloc.tags.detection import TagDetection
 from tagloc.tags.pnp import estimate_tag_poses
 from tagloc.tags.tagmap import DEFAULT_FAMILY
@@ -173,6 +174,9 @@ def survey_from_messages(
     ignore_tags: Iterable[int] = (),
     tag_remaps: Iterable[TagRemap] = (),
     source: str = "stream",
+    lidar_topic: str | None = None,
+    base_frame: str = "base_link",
+    lidar_keep_distance_m: float = 0.5,
 ) -> Survey:
     """A survey from ``(topic, record)`` items.
 
@@ -186,17 +190,34 @@ def survey_from_messages(
         The base in the odometry's child frame (tagSLAM's ``T_body_odom`` inverted).
     tag_remaps : iterable of TagRemap
         Detections re-labelled by stamp (a printed id used twice in the building).
+    lidar_topic : str, optional
+        The :class:`PointCloudMsg` topic (None: a tags-only survey). Sweeps are kept as they
+        stream, the first and then each one after ``lidar_keep_distance_m`` of odometry (the
+        builder uses one per ``keyframe_distance_m``; memory stays small), raw, with their time
+        offsets. The mount ``T_base_lidar`` is the static transform ``base_frame -> <the
+        sweeps' frame_id>`` of the stream (``/tf_static``).
 
     Raises
     ------
     MappingError
-        If the stream has no odometry on ``odom_topic`` or no detections on the camera topics.
+        If the stream has no odometry on ``odom_topic`` or no detections on the camera topics,
+        or sweeps but no static transform from ``base_frame`` to their frame.
     """
     stamps: list[int] = []
     poses: list[SE3] = []
     frames: list[CameraFrame] = []
     remaps = tuple(tag_remaps)
+    sweeps: list[PointCloudMsg] = []
+    statics: dict[tuple[str, str], SE3] = {}
+    kept_at: npt.NDArray[np.float64] | None = None
     for topic, msg in items:
+        if isinstance(msg, TransformMsg) and msg.static:
+            statics[(msg.parent, msg.child)] = msg.T_parent_child
+        elif topic == lidar_topic and isinstance(msg, PointCloudMsg) and poses:
+            position = np.asarray(poses[-1].translation)
+            if kept_at is None or np.linalg.norm(position - kept_at) >= lidar_keep_distance_m:
+                sweeps.append(msg)
+                kept_at = position
         if topic == odom_topic and isinstance(msg, OdometryMsg):
             stamps.append(msg.stamp_ns)
             poses.append(msg.T_parent_child)
@@ -211,6 +232,7 @@ def survey_from_messages(
         raise MappingError(f"{source}: no tag detections on topics {sorted(camera_topics)}")
     T_odom_child = SE3.stack(poses)
     T_odom_base = T_odom_child if T_child_base is None else T_odom_child @ T_child_base
+    lidar = _survey_scans(sweeps, statics, base_frame, source) if sweeps else None
     return Survey(
         odom_stamps_ns=np.array(stamps, dtype=np.int64),
         T_odom_base=T_odom_base,
@@ -221,6 +243,28 @@ def survey_from_messages(
         default_tag_size=default_tag_size,
         ignore_tags=frozenset(int(i) for i in ignore_tags),
         source=source,
+        lidar=lidar,
+    )
+
+
+def _survey_scans(
+    sweeps: list[PointCloudMsg], statics: Mapping[tuple[str, str], SE3], base: str, source: str
+) -> SurveyScans:
+    frame = sweeps[0].frame_id
+    T_base_lidar = statics.get((base, frame))
+    if T_base_lidar is None:
+        raise MappingError(
+            f"{source}: lidar sweeps in frame {frame!r} but no static transform {base} -> "
+            f"{frame} (/tf_static)"
+        )
+    order = np.argsort([m.stamp_ns for m in sweeps], kind="stable")
+    unique = [sweeps[i] for k, i in enumerate(order)
+              if k == 0 or sweeps[i].stamp_ns != sweeps[order[k - 1]].stamp_ns]  # fmt: skip
+    return SurveyScans(
+        stamps_ns=np.array([m.stamp_ns for m in unique], dtype=np.int64),
+        points_lidar=tuple(m.points for m in unique),
+        time_offset_s=tuple(m.time_offset_s for m in unique),
+        T_base_lidar=T_base_lidar,
     )
 
 
@@ -236,12 +280,14 @@ def survey_from_tagslam(
     default_tag_size: float | None = None,
     family: str = DEFAULT_FAMILY,
     source: str = "stream",
+    lidar_topic: str | None = None,
 ) -> Survey:
     """:func:`survey_from_messages` with a tagSLAM rig's settings (:func:`parse_tagslam`): the
     base in the odometry's child frame (``T_body_odom`` inverted), tag sizes, ignored ids and
     id remaps (``rig=None``: none of them).
 
-    ``tag_sizes`` (edge by id, tags of ``family``) and ``default_tag_size`` override the rig's.
+    ``tag_sizes`` (edge by id, tags of ``family``) and ``default_tag_size`` override the rig's;
+    ``lidar_topic``: the sweeps, as :func:`survey_from_messages`.
     """
     sizes = {**(rig.tag_sizes if rig is not None else {}), **(tag_sizes or {})}
     if default_tag_size is None and rig is not None:
@@ -258,6 +304,7 @@ def survey_from_tagslam(
         ignore_tags=rig.ignore_tags if rig is not None else (),
         tag_remaps=rig.tag_remaps if rig is not None else (),
         source=source,
+        lidar_topic=lidar_topic,
     )
 
 

@@ -8,7 +8,10 @@ A :class:`Survey` is plain data, independent of where it came from (the simulato
 - camera frames: ``(stamp_ns, camera name, detections)``; a camera name keys both its model and its
   extrinsic ``T_base_cam`` (a stereo rig has two);
 - tag sizes: black-border edge per ``(family, id)``, or ``default_tag_size`` for the rest;
-- ``ignore_tags``: ids dropped on input (known bad detections).
+- ``ignore_tags``: ids dropped on input (known bad detections);
+- ``lidar``: optional lidar sweeps and the scanner's mount (:class:`~tagloc.mapping.survey_scans.
+  SurveyScans`); with them the builder adds scan-matching factors and builds the premap and the
+  occupancy grid (:mod:`tagloc.mapping.lidar_survey`).
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ import numpy.typing as npt
 from tagloc.camera import CameraModel
 from tagloc.errors import TaglocError
 from tagloc.geometry import SE3
+from tagloc.mapping.survey_scans import SurveyScans
 from tagloc.tags.detection import TagDetection
 
 TagKey = tuple[str, int]  # (family, id)
@@ -63,6 +67,8 @@ class Survey:
         Tag ids dropped on input.
     source : str
         Where the survey came from, for messages.
+    lidar : SurveyScans or None
+        Lidar sweeps (None: a tags-only survey).
     """
 
     odom_stamps_ns: npt.NDArray[np.int64]
@@ -74,6 +80,7 @@ class Survey:
     default_tag_size: float | None = None
     ignore_tags: frozenset[int] = frozenset()
     source: str = "survey"
+    lidar: SurveyScans | None = None
 
     def __post_init__(self) -> None:
         stamps = np.asarray(self.odom_stamps_ns, dtype=np.int64).reshape(-1)
@@ -125,4 +132,5 @@ def only_cameras(survey: Survey, cameras: Sequence[str]) -> Survey:
         survey.default_tag_size,
         survey.ignore_tags,
         f"{survey.source} ({', '.join(sorted(keep))})",
+        survey.lidar,
     )

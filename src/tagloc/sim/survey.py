@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from tagloc.geometry import SE3
 from tagloc.mapping.builder import ProgressFn, build_tag_map
 from tagloc.mapping.config import MapBuildConfig, OdometryNoise
 from tagloc.mapping.exclude import Exclusion, exclude_observations
@@ -68,6 +69,7 @@ def survey_from_drive(
     drive: Drive,
     observation_config: ObservationConfig | None = None,
     camera_stride: int = 1,
+    lidar: bool = False,
 ) -> Survey:
     """The survey of a simulated drive: its drifting odometry and simulated detections.
 
@@ -78,8 +80,10 @@ def survey_from_drive(
         How the simulated detector sees tags (noise, glints).
     camera_stride : int
         Use every ``camera_stride``-th camera frame (1: all, at the robot's camera rate).
+    lidar : bool
+        Also simulate the lidar sweeps a survey keeps (:mod:`tagloc.sim.survey_lidar`).
     """
-    return _survey(drive, _observed(drive, observation_config, camera_stride))
+    return _survey(drive, _observed(drive, observation_config, camera_stride), lidar)
 
 
 def _observed(
@@ -90,7 +94,9 @@ def _observed(
     return [f for f in frames if f.detections]
 
 
-def _survey(drive: Drive, observed: list[ObservedFrame]) -> Survey:
+def _survey(drive: Drive, observed: list[ObservedFrame], lidar: bool = False) -> Survey:
+    from tagloc.sim.survey_lidar import survey_scans_of
+
     world = drive.world
     frames = tuple(CameraFrame(f.stamp_ns, CAMERA, f.detections) for f in observed)
     return Survey(
@@ -101,6 +107,7 @@ def _survey(drive: Drive, observed: list[ObservedFrame]) -> Survey:
         T_base_cam={CAMERA: world.robot.camera.T_base_cam.T_base_cam()},
         tag_sizes={(tag.family, tag.id): tag.size for tag in world.tags},
         source=f"simulated drive of {world.name or 'world'} (seed {drive.seed})",
+        lidar=survey_scans_of(drive) if lidar else None,
     )
 
 
@@ -112,6 +119,7 @@ def build_map_from_drive(
     camera_stride: int = 1,
     progress: ProgressFn | None = None,
     exclusions: Sequence[Exclusion] = (),
+    lidar: bool = False,
 ) -> tuple[TagMap, BuildReport]:
     """Map the tags of a simulated drive (the demo's entry point).
 
@@ -131,6 +139,10 @@ def build_map_from_drive(
         See :func:`tagloc.mapping.build_tag_map`.
     exclusions : sequence of Exclusion
         Observations left out (:func:`tagloc.mapping.exclude.exclude_observations`).
+    lidar : bool
+        Survey with the lidar too: scan-matching factors (:mod:`tagloc.mapping.lidar_survey`).
+        To keep the survey (its sweeps make the premap and the occupancy grid), call
+        :func:`survey_and_anchors` and :func:`tagloc.mapping.build_tag_map` instead.
 
     Raises
     ------
@@ -138,8 +150,25 @@ def build_map_from_drive(
         No anchors are given and the drive detects no tag (a world without tags, or none along
         the route).
     """
+    survey, T_map_anchor = survey_and_anchors(
+        drive, observation_config, anchors, camera_stride, lidar, exclusions
+    )
+    config = config or sim_build_config(drive, observation_config)
+    return build_tag_map(survey, T_map_anchor, config, progress)
+
+
+def survey_and_anchors(
+    drive: Drive,
+    observation_config: ObservationConfig | None = None,
+    anchors: Sequence[int] | None = None,
+    camera_stride: int = 1,
+    lidar: bool = False,
+    exclusions: Sequence[Exclusion] = (),
+) -> tuple[Survey, dict[int, SE3]]:
+    """The survey of a simulated drive and its anchors' true poses (arguments and errors as
+    :func:`build_map_from_drive`)."""
     observed = _observed(drive, observation_config, camera_stride)
-    survey = exclude_observations(_survey(drive, observed), exclusions)
+    survey = exclude_observations(_survey(drive, observed, lidar), exclusions)
     world = drive.world
     if anchors is None:  # the first tag truly detected (not an injected glint)
         first = next((s.tag_id for f in observed for s in f.truth if s.detected), None)
@@ -150,9 +179,7 @@ def build_map_from_drive(
                 "(tagloc world coverage shows where the camera sees one)"
             )
         anchors = [first]
-    T_map_anchor = {i: world.T_map_tag(world.find_tag(i)) for i in anchors}
-    config = config or sim_build_config(drive, observation_config)
-    return build_tag_map(survey, T_map_anchor, config, progress)
+    return survey, {i: world.T_map_tag(world.find_tag(i)) for i in anchors}
 
 
 @dataclass(frozen=True, slots=True)
