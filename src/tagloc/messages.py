@@ -43,6 +43,7 @@ __all__ = [
     "MessageSink",
     "MessageSource",
     "OdometryMsg",
+    "PointCloudMsg",
     "PoseWithCovarianceMsg",
     "TagDetectionsMsg",
     "TransformMsg",
@@ -263,10 +264,62 @@ class GroundTruthMsg:
         _set(self, "T_frame_child", _pose(self, "T_frame_child"))
 
 
+@dataclass(frozen=True, slots=True, eq=False)
+class PointCloudMsg:
+    """One lidar sweep (ROS ``sensor_msgs/PointCloud2`` with float32 fields x, y, z [, intensity]
+    [, t]).
+
+    Attributes
+    ----------
+    stamp_ns : int
+        The sweep's *start*; point ``i`` was measured at ``stamp_ns + time_offset_s[i] * 1e9``.
+    frame_id : str
+        The scanner frame (``lidar``) at the time of *each* point: the points are raw (skewed by
+        the motion during the sweep), as a driver publishes them; see
+        ``tagloc.lidar.cloud.deskew``.
+    points : (N, 3) float32, read-only
+        Metres, x forward, y left, z up. A row may be NaN (a beam without return): consumers
+        drop such rows. N may be 0.
+    intensity : (N,) float32, read-only, or None
+        Return strength (driver units); None when the source has none.
+    time_offset_s : (N,) float32, read-only, or None
+        Seconds after ``stamp_ns``, finite and ``>= 0``; None: every point at ``stamp_ns``.
+    """
+
+    stamp_ns: int
+    frame_id: str
+    points: npt.NDArray[np.float32]
+    intensity: npt.NDArray[np.float32] | None = None
+    time_offset_s: npt.NDArray[np.float32] | None = None
+
+    def __post_init__(self) -> None:
+        _check_stamp_frame(self)
+        points = _float32(self, "points")
+        if points.ndim != 2 or points.shape[1] != 3:
+            raise RecordError(f"PointCloudMsg.points: expected shape (N, 3), got {points.shape}")
+        _set(self, "points", points)
+        n = len(points)
+        for name in ("intensity", "time_offset_s"):
+            if getattr(self, name) is None:
+                continue
+            values = _float32(self, name)
+            if values.shape != (n,):
+                raise RecordError(
+                    f"PointCloudMsg.{name}: expected shape ({n},) like points, got {values.shape}"
+                )
+            if (
+                name == "time_offset_s"
+                and n
+                and not (np.isfinite(values).all() and values.min() >= 0)
+            ):
+                raise RecordError("PointCloudMsg.time_offset_s: must be finite and >= 0")
+            _set(self, name, values)
+
+
 #: Any record of the stream.
 Message: TypeAlias = (
     OdometryMsg | ImageMsg | CameraInfoMsg | TagDetectionsMsg | TransformMsg
-    | PoseWithCovarianceMsg | GroundTruthMsg
+    | PoseWithCovarianceMsg | GroundTruthMsg | PointCloudMsg
 )  # fmt: skip
 MESSAGE_TYPES: tuple[type[Message], ...] = get_args(Message)
 
@@ -368,6 +421,20 @@ def _array(record: Any, name: str, shape: tuple[int, ...]) -> FloatArray:
         raise RecordError(f"{where}: expected shape {shape}, got {array.shape}")
     if not np.isfinite(array).all():
         raise RecordError(f"{where}: holds NaN or infinite values")
+    array.flags.writeable = False
+    return array
+
+
+def _float32(record: Any, name: str) -> npt.NDArray[np.float32]:
+    """A read-only float32 copy of an array field (a read-only float32 array is kept as is)."""
+    value = getattr(record, name)
+    where = f"{type(record).__name__}.{name}"
+    if isinstance(value, np.ndarray) and value.dtype == np.float32 and not value.flags.writeable:
+        return value
+    try:
+        array = np.array(value, dtype=np.float32)
+    except (TypeError, ValueError) as exc:
+        raise RecordError(f"{where}: cannot be read as a float32 array ({exc})") from None
     array.flags.writeable = False
     return array
 

@@ -3,7 +3,8 @@
 - :mod:`tagloc.io.kalibr`: Kalibr camchain yaml -> camera models (:func:`load_kalibr_cameras`).
 - :mod:`tagloc.messages`: the typed stream records (:class:`OdometryMsg`, :class:`ImageMsg`,
   :class:`CameraInfoMsg`, :class:`TagDetectionsMsg`, :class:`TransformMsg`,
-  :class:`PoseWithCovarianceMsg`, :class:`GroundTruthMsg`; the :data:`Message` union) and the
+  :class:`PoseWithCovarianceMsg`, :class:`GroundTruthMsg`,
+  :class:`PointCloudMsg`; the :data:`Message` union) and the
   :class:`MessageSource` / :class:`MessageSink` protocols.
 - :mod:`tagloc.io.bag_reader`: ROS 1 / ROS 2 bags and MCAP files as a source (:class:`BagSource`).
 - :mod:`tagloc.io.bag_writer`: records to MCAP / ROS 2 / ROS 1 bags (:class:`BagSink`).
@@ -38,6 +39,7 @@ from tagloc.messages import (
     MessageSink,
     MessageSource,
     OdometryMsg,
+    PointCloudMsg,
     PoseWithCovarianceMsg,
     TagDetectionsMsg,
     TransformMsg,
@@ -58,6 +60,7 @@ __all__ = [
     "MessageSink",
     "MessageSource",
     "OdometryMsg",
+    "PointCloudMsg",
     "PoseWithCovarianceMsg",
     "RecordError",
     "TagDetectionsMsg",

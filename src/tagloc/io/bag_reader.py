@@ -20,7 +20,8 @@ Bad content
     message, one transform of a ``TFMessage``, or one detection of a tag array (the array itself
     is kept). Reasons: ``non_finite`` (NaN/inf pose, covariance or twist), ``bad_quaternion``,
     ``duplicate_stamp``, ``stamp_backwards``, ``bad_detection``, ``unknown_family``,
-    ``unsupported_encoding``, ``bad_image``, ``undecodable``, ``invalid_record``.
+    ``unsupported_encoding``, ``bad_image``, ``bad_point_cloud``, ``undecodable``,
+    ``invalid_record``.
 Options that do not fit the data
     are always errors: a ``corner_order`` whose corners come out mirrored, an empty tag family
     without ``default_family``.
@@ -161,7 +162,8 @@ class BagSource:
         Bag topics to read, each mapped to the topic name it gets in the stream (a sequence keeps
         the names). Default: every topic whose type tagloc reads (others are logged and left out).
         Supported types: ``nav_msgs/Odometry``, ``sensor_msgs/Image`` (mono8, 8UC1, bgr8, rgb8),
-        ``sensor_msgs/CompressedImage``, ``sensor_msgs/CameraInfo``, ``tf2_msgs/TFMessage``,
+        ``sensor_msgs/CompressedImage``, ``sensor_msgs/CameraInfo``, ``sensor_msgs/PointCloud2``
+        (as :class:`PointCloudMsg`), ``tf2_msgs/TFMessage``,
         ``geometry_msgs/PoseWithCovarianceStamped``, ``geometry_msgs/PoseStamped`` (as
         :class:`GroundTruthMsg`), ``apriltag_msgs/ApriltagArrayStamped`` (ROS 1) and
         ``apriltag_msgs/AprilTagDetectionArray`` (ROS 2); conversions in

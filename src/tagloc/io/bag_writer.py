@@ -10,6 +10,9 @@ PoseWithCovarianceMsg   ``geometry_msgs/PoseWithCovarianceStamped``
 GroundTruthMsg          ``geometry_msgs/PoseStamped``
 ImageMsg                ``sensor_msgs/Image`` (``mono8`` or ``bgr8``, no row padding)
 CameraInfoMsg           ``sensor_msgs/CameraInfo`` (``R`` identity, ``P = [K | 0]`` if absent)
+PointCloudMsg           ``sensor_msgs/PointCloud2``, one row (``height`` 1), little-endian float32
+                        fields ``x, y, z`` [, ``intensity``] [, ``t`` (time offset, s)] packed
+                        without padding; ``is_dense`` False when a row is NaN
 TagDetectionsMsg        ROS 1 ``apriltag_msgs/ApriltagArrayStamped`` (the dupont type, no margin);
                         ROS 2 / MCAP ``apriltag_msgs/AprilTagDetectionArray`` (float32 margin,
                         homography zeros). Corners in tagloc's order ``tl_tr_br_bl``, offset 0:
@@ -47,6 +50,7 @@ from tagloc.messages import (
     ImageMsg,
     Message,
     OdometryMsg,
+    PointCloudMsg,
     PoseWithCovarianceMsg,
     TagDetectionsMsg,
     TransformMsg,
@@ -60,6 +64,7 @@ _MSGTYPES: dict[type[Message], str] = {
     GroundTruthMsg: "geometry_msgs/msg/PoseStamped",
     ImageMsg: "sensor_msgs/msg/Image",
     CameraInfoMsg: "sensor_msgs/msg/CameraInfo",
+    PointCloudMsg: "sensor_msgs/msg/PointCloud2",
 }
 
 _ROS_TYPES = (
@@ -74,6 +79,8 @@ _ROS_TYPES = (
     "sensor_msgs/msg/Image",
     "sensor_msgs/msg/CameraInfo",
     "sensor_msgs/msg/RegionOfInterest",
+    "sensor_msgs/msg/PointCloud2",
+    "sensor_msgs/msg/PointField",
 )  # fmt: skip
 
 
@@ -316,6 +323,8 @@ class _Encoder:
             return t["Image"](header, h, w, msg.encoding, 0, step, data)
         if isinstance(msg, CameraInfoMsg):
             return self._camera_info(header, msg.info)
+        if isinstance(msg, PointCloudMsg):
+            return self._point_cloud(header, msg)
         return self._tag(header, [self._tag_detection(d) for d in msg.detections])
 
     # ----- pieces --------------------------------------------------------------------------------
@@ -372,3 +381,19 @@ class _Encoder:
             det.family, det.tag_id, det.hamming, 0.0, det.decision_margin,
             P2(*center), [P2(u, v) for u, v in points], np.zeros(9),
         )  # fmt: skip
+
+    def _point_cloud(self, header: Any, msg: PointCloudMsg) -> Any:
+        columns = [("x", msg.points[:, 0]), ("y", msg.points[:, 1]), ("z", msg.points[:, 2])]
+        if msg.intensity is not None:
+            columns.append(("intensity", msg.intensity))
+        if msg.time_offset_s is not None:
+            columns.append(("t", msg.time_offset_s))
+        n, step = len(msg.points), 4 * len(columns)
+        packed = np.empty((n, len(columns)), dtype="<f4")
+        for i, (_, values) in enumerate(columns):
+            packed[:, i] = values
+        field = self._t["PointField"]
+        fields = [field(name, 4 * i, field.FLOAT32, 1) for i, (name, _) in enumerate(columns)]
+        dense = bool(np.isfinite(msg.points).all())
+        data = packed.reshape(-1).view(np.uint8)
+        return self._t["PointCloud2"](header, 1, n, fields, False, step, step * n, data, dense)

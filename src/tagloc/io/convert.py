@@ -16,6 +16,16 @@ the writer, :mod:`tagloc.io.bag_writer`. Conventions, both ways:
 - Images: ``mono8``/``8UC1`` -> ``(H, W)``; ``bgr8`` -> ``(H, W, 3)``; ``rgb8`` -> reversed to
   ``bgr8``; row padding (``step``) dropped. ``CompressedImage`` is decoded with
   ``cv2.imdecode(..., IMREAD_UNCHANGED)`` (BGR; alpha dropped; 16-bit images unsupported).
+- Point clouds (``sensor_msgs/PointCloud2``): fields ``x, y, z`` (float32 or float64) are
+  required, ``intensity`` is kept when present; the per-point time is read from the first of
+  ``t`` (float: seconds after the stamp; integer: nanoseconds, as Ouster), ``time`` (seconds
+  after the stamp, as Velodyne), ``offset_time`` (integer nanoseconds after the stamp, as
+  Livox), ``timestamp`` (absolute: nanoseconds if its values exceed 1e12, else seconds, as
+  Livox ROS Driver 2 and Hesai). Drivers that stamp the sweep's end give negative offsets: the
+  record's stamp is then moved to the earliest point and the offsets re-based on it, so they
+  are ``>= 0``. Any byte order, padding and row step; a cloud whose data is shorter than its
+  ``height * row_step``, a field outside the point or of an unknown type is
+  ``Bad("bad_point_cloud")``.
 - Tag corners enter through :meth:`TagDetection.from_corners` with the reader's ``corner_order``
   and ``pixel_offset``; the writer stores tagloc's own order (``tl_tr_br_bl``, offset 0).
 """
@@ -40,6 +50,7 @@ from tagloc.messages import (
     ImageMsg,
     Message,
     OdometryMsg,
+    PointCloudMsg,
     PoseWithCovarianceMsg,
     TagDetectionsMsg,
     TransformMsg,
@@ -251,6 +262,65 @@ def _camera_info(msg: Any, log_ns: int, opts: DecodeOptions, static: bool) -> De
     return [CameraInfoMsg(_stamp(msg.header, log_ns, opts), msg.header.frame_id, info)]
 
 
+_POINT_FIELD_TYPES = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
+_TIME_FIELDS = ("t", "time", "offset_time", "timestamp")
+
+
+def _point_cloud(msg: Any, log_ns: int, opts: DecodeOptions, static: bool) -> Decoded:
+    h, w, step, row_step = (int(v) for v in (msg.height, msg.width, msg.point_step, msg.row_step))
+    data = np.asarray(msg.data, dtype=np.uint8)
+    shape = f"{h}x{w} cloud, point_step {step}, row_step {row_step}, {data.size} bytes"
+    if h * w and (row_step < w * step or data.size < h * row_step):
+        return [Bad("bad_point_cloud", f"{shape}: data too short")]
+    order = ">" if msg.is_bigendian else "<"
+    fields: dict[str, tuple[str, int]] = {}
+    for field in msg.fields:
+        kind = _POINT_FIELD_TYPES.get(int(field.datatype))
+        if kind is None or int(field.offset) + int(kind[1]) > step:
+            return [Bad("bad_point_cloud", f"{shape}: field {field.name!r} does not fit a point")]
+        fields.setdefault(str(field.name), (order + kind, int(field.offset)))
+    if missing := [n for n in "xyz" if n not in fields]:
+        return [Bad("bad_point_cloud", f"{shape}: no field(s) {missing}")]
+    rows = data[: h * row_step].reshape(h, row_step)[:, : w * step] if h * w else data[:0]
+    raw = (
+        np.ascontiguousarray(rows).reshape(h * w, step) if h * w else np.zeros((0, step), np.uint8)
+    )
+
+    def column(name: str) -> Any:
+        kind, offset = fields[name]
+        return raw[:, offset : offset + int(kind[2])].copy().view(kind)[:, 0]
+
+    points = np.stack([column(n) for n in "xyz"], axis=1).astype(np.float32)
+    intensity = column("intensity").astype(np.float32) if "intensity" in fields else None
+    stamp = _stamp(msg.header, log_ns, opts)
+    offsets = _time_offsets(fields, column, stamp)
+    if offsets is not None and len(offsets):
+        if not np.isfinite(offsets).all():
+            return [Bad("non_finite", f"{shape}: point times hold NaN or inf")]
+        if (earliest := float(offsets.min())) < 0.0:
+            stamp, offsets = stamp + round(earliest * 1e9), offsets - earliest
+            if stamp < 0:
+                return [Bad("bad_point_cloud", f"{shape}: points measured before time 0")]
+    offsets32 = None if offsets is None else offsets.astype(np.float32)
+    return [PointCloudMsg(stamp, msg.header.frame_id, points, intensity, offsets32)]
+
+
+def _time_offsets(fields: Mapping[str, Any], column: Callable[[str], Any], stamp: int) -> Any:
+    """Per-point seconds after ``stamp`` (float64), or None (see the module docstring)."""
+    name = next((n for n in _TIME_FIELDS if n in fields), None)
+    if name is None:
+        return None
+    values, integer = column(name), fields[name][0][1] in "iu"
+    if name == "offset_time" or (name == "t" and integer):
+        return values.astype(np.float64) * 1e-9
+    if name in ("t", "time"):
+        return values.astype(np.float64)
+    values = values.astype(np.float64)
+    if len(values) and np.nanmax(np.abs(values)) > 1e12:  # absolute nanoseconds
+        return (values - float(stamp)) * 1e-9
+    return values - stamp * 1e-9
+
+
 def resolve_family(name: str, opts: DecodeOptions) -> str | Bad:
     """The tagloc family of a message's ``family`` string (``"36h11"``, ``"tf36h11"``, ...).
 
@@ -331,6 +401,7 @@ DECODERS: Mapping[str, tuple[Decoder, type[Message]]] = {
     "sensor_msgs/msg/Image": (_image, ImageMsg),
     "sensor_msgs/msg/CompressedImage": (_compressed, ImageMsg),
     "sensor_msgs/msg/CameraInfo": (_camera_info, CameraInfoMsg),
+    "sensor_msgs/msg/PointCloud2": (_point_cloud, PointCloudMsg),
     "tf2_msgs/msg/TFMessage": (_tf, TransformMsg),
     "tf/msg/tfMessage": (_tf, TransformMsg),
     "geometry_msgs/msg/PoseWithCovarianceStamped": (_pose_cov, PoseWithCovarianceMsg),
