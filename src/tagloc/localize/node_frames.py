@@ -91,6 +91,10 @@ class CameraFrames:
     def _tick(self, stamp: int, reason: str = "") -> None:
         raise NotImplementedError  # the node's: steps the supervisor
 
+    if TYPE_CHECKING:
+
+        def _note_tags(self, detections: tuple[TagDetection, ...]) -> None: ...  # LidarScans'
+
     def _skip(self, reason: str, detail: str) -> None:
         """Count a skipped input; log the first of each reason."""
         self.skipped[reason] += 1
@@ -198,6 +202,7 @@ class CameraFrames:
         source = self._fix_source(frame)
         if source is None:
             return
+        self._note_tags(frame.detections)  # the lidar's cab rule
         truth = self._truth_info.get(frame.stamp_ns)
         flags = truth.false_detection if truth is not None else None
         if flags is not None and len(flags) != len(frame.detections):
