@@ -1,0 +1,247 @@
+"""Scan registration with small_gicp: a prepared :class:`Target`, one :func:`register` call.
+
+small_gicp (K. Koide, "small_gicp: Efficient and parallel algorithms for point cloud
+registration", JOSS 2024) minimises ``E(T) = 1/2 sum_i r_i^T M_i r_i`` over ``T_target_source``
+with Gauss-Newton, where ``r_i = q_i - T p_i`` pairs each source point with its nearest target
+point and, for GICP, ``M_i = (C_q + R C_p R^T)^-1`` fuses the two points' local covariances
+(regularised to planes: eigenvalues ``(1e-3, 1, 1)``). Each step updates
+``T <- T Exp(delta)`` with ``delta = [rx, ry, rz, x, y, z]``: a *right* (body) perturbation with
+rotation first. :func:`register` returns the Hessian ``H = sum J^T M J`` permuted to tagloc's
+``[x, y, z, rx, ry, rz]``; the perturbation side is already tagloc's (``T (+) xi = T Exp(xi)``).
+At ``xi = 0`` both Exp maps have identity derivative, so the permutation is exact
+(``tests/lidar/test_registration.py`` checks it by finite differences of small_gicp's own error).
+
+The target (a premap or a keyframe) is downsampled, its covariances estimated and its KD-tree
+built ONCE, in :meth:`Target.from_points`; each scan then pays only for its own preprocessing
+and the optimisation.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+import numpy.typing as npt
+import small_gicp
+from pydantic import Field
+
+from tagloc.config import StrictModel
+from tagloc.geometry import SE3
+from tagloc.lidar.cloud import finite_points
+
+__all__ = ["Registration", "RegistrationConfig", "Target", "register"]
+
+#: small_gicp's tangent [rx, ry, rz, x, y, z] -> tagloc's [x, y, z, rx, ry, rz].
+SMALL_GICP_TO_TAGLOC = np.array([3, 4, 5, 0, 1, 2])
+
+
+class RegistrationConfig(StrictModel):
+    """How a scan is registered against a target (small_gicp)."""
+
+    voxel_m: float = Field(0.15, gt=0.0)
+    """Voxel edge (m) both clouds are downsampled to before registration."""
+    max_correspondence_m: float = Field(1.0, gt=0.0)
+    """Pairs farther apart than this (m) are outliers (not in the cost, not inliers)."""
+    max_iterations: int = Field(30, ge=1)
+    """Gauss-Newton iterations at most."""
+    num_threads: int = Field(1, ge=1)
+    """Threads small_gicp may use (1: the node shares its core with the other fix sources)."""
+    kernel: Literal["GICP", "PLANE_ICP", "ICP"] = "GICP"
+    """The per-pair cost: ``GICP`` (distribution to distribution, default), ``PLANE_ICP``
+    (point to plane) or ``ICP`` (point to point)."""
+    num_neighbors: int = Field(10, ge=5)
+    """Neighbours used to estimate each point's covariance / normal."""
+    rotation_epsilon_rad: float = Field(1e-4, gt=0.0)
+    """Converged when a step rotates less than this (rad) ..."""
+    translation_epsilon_m: float = Field(1e-4, gt=0.0)
+    """... and moves less than this (m)."""
+
+
+class Target:
+    """A point cloud prepared for registration: downsampled, covariances, KD-tree (built once).
+
+    Build with :meth:`from_points`; reuse for every scan (a premap at node start, not per scan).
+    """
+
+    __slots__ = ("_cloud", "_normals", "_points", "_tree", "voxel_m")
+
+    def __init__(self, cloud: Any, tree: Any, voxel_m: float) -> None:
+        self._cloud = cloud
+        self._tree = tree
+        self.voxel_m = voxel_m
+        self._points = np.array(np.asarray(cloud.points())[:, :3])
+        self._normals = np.array(np.asarray(cloud.normals())[:, :3])
+        self._points.flags.writeable = self._normals.flags.writeable = False
+
+    @classmethod
+    def from_points(cls, points: npt.ArrayLike, config: RegistrationConfig) -> Target:
+        """Prepare ``points`` (``(N, 3)`` metres, in the target frame; NaN rows dropped)."""
+        cloud, tree = small_gicp.preprocess_points(
+            finite_points(points),
+            downsampling_resolution=config.voxel_m,
+            num_neighbors=config.num_neighbors,
+            num_threads=config.num_threads,
+        )
+        return cls(cloud, tree, config.voxel_m)
+
+    def __len__(self) -> int:
+        return int(self._points.shape[0])
+
+    @property
+    def points(self) -> np.ndarray:
+        """``(M, 3)`` the downsampled target points (metres)."""
+        return self._points
+
+    @property
+    def normals(self) -> np.ndarray:
+        """``(M, 3)`` unit normals of the downsampled target points."""
+        return self._normals
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Registration:
+    """The result of :func:`register`.
+
+    Attributes
+    ----------
+    T_target_source : SE3
+        Maps source points into the target frame.
+    hessian : (6, 6) float
+        small_gicp's Gauss-Newton ``H = sum J^T M J`` at the last linearisation, in tagloc's
+        order ``[x, y, z, rx, ry, rz]``, body tangent of ``T_target_source``. Units follow
+        ``M`` (for GICP: the regularised covariances, not metres^-2; see :mod:`tagloc.lidar.fix`
+        for the scale).
+    error : float
+        ``E = 1/2 sum r^T M r`` over the inliers at that linearisation.
+    plane_hessian : (6, 6) float
+        ``sum_i g_i g_i^T`` over the inliers at ``T_target_source``, ``g_i`` the gradient of the
+        point-to-plane distance ``n_i^T (T p_i - q_i)`` (m) with respect to the body tangent
+        ``[x, y, z, rx, ry, rz]``: the information of the pose for unit point-to-plane noise,
+        free of GICP's covariance regularisation (its in-plane terms). The lidar fix uses it.
+    rmse_m : float
+        RMS point-to-plane distance (m) of the inlier source points to their nearest target
+        point's plane, at ``T_target_source``.
+    sigma_m : float
+        Robust scale of those distances: ``1.4826 * median(|d|)`` (m; a normal distribution's
+        standard deviation, unmoved by the few pairs that straddle an edge or a corner).
+    num_plane_inliers : int
+        The points behind ``rmse_m``, ``sigma_m`` and ``plane_hessian``.
+    inlier_fraction : float
+        ``num_inliers`` over the downsampled source points.
+    num_inliers, num_points : int
+        Pairs within ``max_correspondence_m``; downsampled source points.
+    converged : bool
+    iterations : int
+    """
+
+    T_target_source: SE3
+    hessian: np.ndarray
+    error: float
+    plane_hessian: np.ndarray
+    rmse_m: float
+    sigma_m: float
+    num_plane_inliers: int
+    inlier_fraction: float
+    num_inliers: int
+    num_points: int
+    converged: bool
+    iterations: int
+
+
+def register(
+    source_points: npt.ArrayLike,
+    target: Target,
+    T_target_source_init: SE3,
+    config: RegistrationConfig,
+) -> Registration:
+    """Register ``source_points`` (``(N, 3)`` metres, source frame) against ``target``.
+
+    Steps: preprocess the source (downsample to ``voxel_m``, covariances); Gauss-Newton from
+    ``T_target_source_init``; permute the Hessian to tagloc's order; measure the inliers'
+    point-to-plane RMS. An empty source (or target) gives a non-converged result with
+    0 inliers and a zero Hessian.
+    """
+    source = finite_points(source_points)
+    if source.shape[0] == 0 or len(target) == 0:
+        return _empty(T_target_source_init)
+    cloud, _ = small_gicp.preprocess_points(
+        source,
+        downsampling_resolution=config.voxel_m,
+        num_neighbors=config.num_neighbors,
+        num_threads=config.num_threads,
+    )
+    result = small_gicp.align(
+        target._cloud,
+        cloud,
+        target._tree,
+        init_T_target_source=T_target_source_init.as_matrix(),
+        registration_type=config.kernel,
+        max_correspondence_distance=config.max_correspondence_m,
+        num_threads=config.num_threads,
+        max_iterations=config.max_iterations,
+        rotation_epsilon=config.rotation_epsilon_rad,
+        translation_epsilon=config.translation_epsilon_m,
+    )
+    T_target_source = SE3.from_matrix(result.T_target_source, normalize=True)
+    points = np.asarray(cloud.points())[:, :3]
+    order = SMALL_GICP_TO_TAGLOC
+    hessian = np.asarray(result.H)[np.ix_(order, order)]
+    plane = _point_to_plane(points, target, T_target_source, config)
+    return Registration(
+        T_target_source=T_target_source,
+        hessian=0.5 * (hessian + hessian.T),
+        error=float(result.error),
+        plane_hessian=plane[0],
+        rmse_m=plane[1],
+        sigma_m=plane[2],
+        num_plane_inliers=plane[3],
+        inlier_fraction=result.num_inliers / points.shape[0],
+        num_inliers=int(result.num_inliers),
+        num_points=int(points.shape[0]),
+        converged=bool(result.converged),
+        iterations=int(result.iterations) + 1,
+    )
+
+
+def _point_to_plane(
+    points_source: np.ndarray, target: Target, T_target_source: SE3, config: RegistrationConfig
+) -> tuple[np.ndarray, float, float, int]:
+    """Point-to-plane information, RMS and robust sigma (m, ``nan`` when no inlier) and count
+    of the moved source points within the correspondence radius of their nearest target point.
+
+    The distance of ``T p`` to the plane ``(q, n)`` is ``d = n^T (R p + t - q)``; under a body
+    perturbation ``T Exp(xi)`` its gradient is ``g = [R^T n, p x (R^T n)]`` (Sola et al. 2018,
+    App. D: ``d(T p)/d xi = [R, -R [p]x]``).
+    """
+    moved = T_target_source.act(points_source)
+    index, sq_dist = target._tree.batch_nearest_neighbor_search(moved, config.num_threads)
+    index, sq_dist = np.asarray(index).reshape(-1), np.asarray(sq_dist).reshape(-1)
+    inlier = (index >= 0) & (sq_dist <= config.max_correspondence_m**2)
+    if not inlier.any():
+        return np.zeros((6, 6)), float("nan"), float("nan"), 0
+    nearest = index[inlier]
+    normals_target = target.normals[nearest]
+    distance = np.einsum("ij,ij->i", moved[inlier] - target.points[nearest], normals_target)
+    normals_source = T_target_source.rotation.inverse().act(normals_target)
+    gradient = np.hstack([normals_source, np.cross(points_source[inlier], normals_source)])
+    rmse = float(np.sqrt(np.mean(distance**2)))
+    sigma = float(1.4826 * np.median(np.abs(distance)))
+    return gradient.T @ gradient, rmse, sigma, int(np.count_nonzero(inlier))
+
+
+def _empty(T_target_source: SE3) -> Registration:
+    return Registration(
+        T_target_source=T_target_source,
+        hessian=np.zeros((6, 6)),
+        error=0.0,
+        plane_hessian=np.zeros((6, 6)),
+        rmse_m=float("nan"),
+        sigma_m=float("nan"),
+        num_plane_inliers=0,
+        inlier_fraction=0.0,
+        num_inliers=0,
+        num_points=0,
+        converged=False,
+        iterations=0,
+    )
