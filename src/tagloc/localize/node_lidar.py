@@ -76,7 +76,7 @@ def check_premap_overlap(premap_map: np.ndarray, tag_map: TagMap, map_frame: str
     tags = tag_map.in_frame(map_frame)
     if not len(tags):
         return
-    xy = np.array([t.T_frame_tag.translation[:2] for t in tags])
+    xy = np.array([t.T_frame_tag().translation[:2] for t in tags])
     lo = premap_map[:, :2].min(axis=0) - PREMAP_TAG_MARGIN_M
     hi = premap_map[:, :2].max(axis=0) + PREMAP_TAG_MARGIN_M
     if not ((xy >= lo) & (xy <= hi)).all(axis=1).any():
