@@ -129,6 +129,8 @@ class LidarScans:
                 "lidar_wrong_frame",
                 f"cloud at {msg.stamp_ns} ns in frame {msg.frame_id!r}, expected {cfg.frame_id!r}",
             )
+        if not np.isfinite(msg.points).all(axis=1).any():
+            return self._skip("lidar_empty", f"sweep at {msg.stamp_ns} ns has no finite point")
         if msg.stamp_ns < self._next_scan_ns:
             self.lidar_counts["thinned"] += 1
             return None
@@ -173,20 +175,20 @@ class LidarScans:
             self.skipped["in_cab"] += 1
             return None
         finite = np.isfinite(msg.points).all(axis=1)
-        if not finite.any():
-            return self._skip("lidar_empty", f"sweep at {stamp} ns has no finite point")
         points_lidar = np.asarray(msg.points, dtype=np.float64)[finite]
         try:
             T_base_lidar = self.buffer.lookup(f.base_frame, msg.frame_id, stamp)
-            offsets = msg.time_offset_s
-            if offsets is not None:
+        except TransformLookupError as exc:
+            return self._skip("lidar_no_tf", f"sweep at {stamp} ns: {exc}")
+        offsets = msg.time_offset_s
+        if offsets is not None:
+            try:
                 points_lidar = deskew(
                     points_lidar, np.asarray(offsets, dtype=np.float64)[finite],
                     self._sweep_motion(stamp, T_base_lidar),
                 )  # fmt: skip
-        except TransformLookupError as exc:
-            reason = "lidar_no_odometry" if f.odom_frame in str(exc) else "lidar_no_tf"
-            return self._skip(reason, f"sweep at {stamp} ns: {exc}")
+            except TransformLookupError as exc:
+                return self._skip("lidar_no_odometry", f"sweep at {stamp} ns: {exc}")
         if not self.filter.initialized:
             self.skipped["lidar_no_estimate"] += 1
             return None
@@ -197,7 +199,9 @@ class LidarScans:
         points_base = T_base_lidar.act(points_lidar)
         fix = lidar_fix(points_base, premap, T_map_base_prior, cfg.fix)
         if fix.rejected is not None:
-            self._skip(f"lidar_rejected: {_reason_key(fix.rejected)}", f"{stamp} ns: {fix.rejected}")
+            self._skip(
+                f"lidar_rejected: {_reason_key(fix.rejected)}", f"{stamp} ns: {fix.rejected}"
+            )
             self._held.hold(_attempt(stamp, fix.T_map_base, None, f"rejected:{fix.rejected}"))
             self.supervisor.on_fix(LIDAR, False, math.nan, math.nan)
             return None
@@ -261,4 +265,3 @@ def _attempt(stamp: int, T_map_base: SE3, fix: PartialFix | None, decision: str)
         B = fix.basis
         cov = B @ fix.cov @ B.T + UNMEASURED_VAR * (np.eye(6) - B @ B.T)
     return FixAttempt(stamp, LIDAR, (), T_map_base, cov, decision, math.nan, math.nan, None)
-
