@@ -153,7 +153,8 @@ class BagSink:
         return writer
 
     def write(self, topic: str, msg: Message, log_time_ns: int | None = None) -> None:
-        """Append ``msg`` on ``topic`` (log time ``log_time_ns``, default ``msg.stamp_ns``).
+        """Append ``msg`` on ``topic`` (log time ``log_time_ns``, default ``msg.stamp_ns``; for a
+        :class:`PointCloudMsg` the time of its last point, when a driver publishes the sweep).
 
         Raises
         ------
@@ -180,7 +181,7 @@ class BagSink:
         try:
             conn = self._topics[topic][0] if topic in self._topics else self._connect(topic, msg)
             data = self._encoder.serialize(self._encoder.encode(msg, seq), conn.msgtype)
-            self._writer.write(conn, msg.stamp_ns if log_time_ns is None else log_time_ns, data)
+            self._writer.write(conn, _log_time(msg) if log_time_ns is None else log_time_ns, data)
         except Exception as exc:
             raise BagWriteError(f"{self.path}: {topic} message {seq}: {exc}") from exc
         self._seq[topic] = seq + 1
@@ -243,6 +244,12 @@ class BagSink:
             self.close()
         else:
             self.abort()
+
+
+def _log_time(msg: Message) -> int:
+    if isinstance(msg, PointCloudMsg) and msg.time_offset_s is not None and len(msg.points):
+        return msg.stamp_ns + round(float(msg.time_offset_s.max()) * 1e9)
+    return msg.stamp_ns
 
 
 def _is_static(topic: str) -> bool:

@@ -82,7 +82,8 @@ def deskew(
     if len(unique) == 1 and not motion.is_batch:
         return motion.act(points)
     rotations = motion.rotation.matrix[index]
-    return np.einsum("nij,nj->ni", rotations, points) + motion.translation[index]
+    moved: np.ndarray = np.einsum("nij,nj->ni", rotations, points) + motion.translation[index]
+    return moved
 
 
 def voxel_downsample(points: npt.ArrayLike, voxel_m: float) -> np.ndarray:

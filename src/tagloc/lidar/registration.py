@@ -9,7 +9,8 @@ point and, for GICP, ``M_i = (C_q + R C_p R^T)^-1`` fuses the two points' local 
 rotation first. :func:`register` returns the Hessian ``H = sum J^T M J`` permuted to tagloc's
 ``[x, y, z, rx, ry, rz]``; the perturbation side is already tagloc's (``T (+) xi = T Exp(xi)``).
 At ``xi = 0`` both Exp maps have identity derivative, so the permutation is exact
-(``tests/lidar/test_registration.py`` checks it by finite differences of small_gicp's own error).
+(``tests/lidar/test_registration.py`` checks it by finite differences of small_gicp's own
+gradient ``b``).
 
 The target (a premap or a keyframe) is downsampled, its covariances estimated and its KD-tree
 built ONCE, in :meth:`Target.from_points`; each scan then pays only for its own preprocessing
@@ -113,7 +114,8 @@ class Registration:
         ``M`` (for GICP: the regularised covariances, not metres^-2; see :mod:`tagloc.lidar.fix`
         for the scale).
     error : float
-        ``E = 1/2 sum r^T M r`` over the inliers at that linearisation.
+        small_gicp's reported final cost ``1/2 sum r^T M r`` (it is evaluated after the last
+        step, not at the last linearisation; for information only).
     plane_hessian : (6, 6) float
         ``sum_i g_i g_i^T`` over the inliers at ``T_target_source``, ``g_i`` the gradient of the
         point-to-plane distance ``n_i^T (T p_i - q_i)`` (m) with respect to the body tangent
@@ -139,6 +141,7 @@ class Registration:
     hessian: np.ndarray
     error: float
     plane_hessian: np.ndarray
+    plane_scatter: np.ndarray
     rmse_m: float
     sigma_m: float
     num_plane_inliers: int
@@ -193,9 +196,10 @@ def register(
         hessian=0.5 * (hessian + hessian.T),
         error=float(result.error),
         plane_hessian=plane[0],
-        rmse_m=plane[1],
-        sigma_m=plane[2],
-        num_plane_inliers=plane[3],
+        plane_scatter=plane[1],
+        rmse_m=plane[2],
+        sigma_m=plane[3],
+        num_plane_inliers=plane[4],
         inlier_fraction=result.num_inliers / points.shape[0],
         num_inliers=int(result.num_inliers),
         num_points=int(points.shape[0]),
@@ -206,7 +210,7 @@ def register(
 
 def _point_to_plane(
     points_source: np.ndarray, target: Target, T_target_source: SE3, config: RegistrationConfig
-) -> tuple[np.ndarray, float, float, int]:
+) -> tuple[np.ndarray, np.ndarray, float, float, int]:
     """Point-to-plane information, RMS and robust sigma (m, ``nan`` when no inlier) and count
     of the moved source points within the correspondence radius of their nearest target point.
 
@@ -219,7 +223,7 @@ def _point_to_plane(
     index, sq_dist = np.asarray(index).reshape(-1), np.asarray(sq_dist).reshape(-1)
     inlier = (index >= 0) & (sq_dist <= config.max_correspondence_m**2)
     if not inlier.any():
-        return np.zeros((6, 6)), float("nan"), float("nan"), 0
+        return np.zeros((6, 6)), np.zeros((6, 6)), float("nan"), float("nan"), 0
     nearest = index[inlier]
     normals_target = target.normals[nearest]
     distance = np.einsum("ij,ij->i", moved[inlier] - target.points[nearest], normals_target)
@@ -227,7 +231,9 @@ def _point_to_plane(
     gradient = np.hstack([normals_source, np.cross(points_source[inlier], normals_source)])
     rmse = float(np.sqrt(np.mean(distance**2)))
     sigma = float(1.4826 * np.median(np.abs(distance)))
-    return gradient.T @ gradient, rmse, sigma, int(np.count_nonzero(inlier))
+    clipped = np.minimum(np.abs(distance), 3.0 * sigma)
+    scatter = (gradient * clipped[:, None] ** 2).T @ gradient
+    return gradient.T @ gradient, scatter, rmse, sigma, int(np.count_nonzero(inlier))
 
 
 def _empty(T_target_source: SE3) -> Registration:
@@ -236,6 +242,7 @@ def _empty(T_target_source: SE3) -> Registration:
         hessian=np.zeros((6, 6)),
         error=0.0,
         plane_hessian=np.zeros((6, 6)),
+        plane_scatter=np.zeros((6, 6)),
         rmse_m=float("nan"),
         sigma_m=float("nan"),
         num_plane_inliers=0,

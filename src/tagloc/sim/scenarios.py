@@ -43,14 +43,17 @@ from tagloc.messages import (
     GroundTruthMsg,
     Message,
     OdometryMsg,
+    PointCloudMsg,
     TagDetectionsMsg,
     TransformMsg,
 )
 from tagloc.sim.drive import Drive, simulate_drive
 from tagloc.sim.faults import ClockJump, DropMessages, DuplicateMessages, StreamFault, apply_faults
+from tagloc.sim.lidar import LIDAR_FRAME, LidarSimulator, Sweep
 from tagloc.sim.observations import ObservationConfig, simulate_observations
+from tagloc.sim.people import Person, crowd_around
 from tagloc.sim.trajectory import Trajectory
-from tagloc.sim.world import WallMount, World, load_default_world
+from tagloc.sim.world import WallMount, World, load_builtin_world, load_default_world
 from tagloc.tags.covariance import NoiseModel
 from tagloc.tags.tagmap import TagEntry, TagMap
 
@@ -88,6 +91,10 @@ class ScenarioSpec:
     dropout_s: tuple[float, float] | None = None
     #: Applied to the message stream (:mod:`tagloc.sim.faults`), as a bag would deliver it.
     faults: tuple[StreamFault, ...] = ()
+    #: A built-in world other than the office (:data:`tagloc.sim.world.BUILTIN_WORLDS`).
+    world: str | None = None
+    #: People walking with the robot, hiding about this fraction of the lidar's beams.
+    crowd_fraction: float | None = None
 
 
 SCENARIOS: dict[str, ScenarioSpec] = {
@@ -137,6 +144,33 @@ SCENARIOS: dict[str, ScenarioSpec] = {
         "fused trajectory those of the drive without duplicates",
         faults=(DuplicateMessages(30.0, 40.0),),
     ),
+    # lidar scenarios (the world's robot carries the lidar; tags are unaffected by glass)
+    "glass_corridor": ScenarioSpec(
+        "a 40 m corridor walled with glass on both sides and nothing behind it: the lidar sees "
+        "the floor and, within 40 m, the end walls only, so it cannot fix the position across "
+        "or (far from the ends) along the corridor; tags on the glass carry the localization",
+        world="glass_corridor",
+    ),
+    "mirrored_lobby": ScenarioSpec(
+        "a lobby whose east wall is a mirror: lidar beams reflected by it return phantom "
+        "geometry behind the mirror (the reflected lobby), consistent in every sweep and so "
+        "in a premap made with the scanner",
+        world="mirrored_lobby",
+    ),
+    "crowd": ScenarioSpec(
+        "the office route in a crowd: people walking with the robot at 0.9 m hide about 45 % of "
+        "the lidar's beams (between 30 % and 60 % in every sweep), the gaps between them moving",
+        crowd_fraction=0.45,
+    ),
+    "lidar_unplugged": ScenarioSpec(
+        "lidar unplugged: no point clouds from 30 s to 50 s (odometry and camera continue)",
+        faults=(DropMessages(30.0, 50.0, (PointCloudMsg,)),),
+    ),
+    "long_corridor": ScenarioSpec(
+        "a 60 m straight corridor without doors and with tags only at its ends: lidar "
+        "constrains the position across the corridor and the heading, not along it",
+        world="long_corridor",
+    ),
 }
 
 
@@ -183,6 +217,8 @@ class Scenario:
     camera_stamps_ns: npt.NDArray[np.int64]
     kidnaps_ns: list[int]
     faults: tuple[StreamFault, ...] = ()
+    #: Lidar occluders: the world's people and the scenario's crowd.
+    people: tuple[Person, ...] = ()
 
 
 def tag_map_from_world(world: World) -> TagMap:
@@ -206,11 +242,11 @@ def build_scenario(
     ----------
     name : str
     seed : int
-        Odometry and observation-noise seed.
+        Odometry, observation-noise and crowd seed.
     duration_s : float, optional
         Keep only the first ``duration_s`` seconds of the drive (default: all of it, ~700 s).
     world : World, optional
-        Default: the built-in office world.
+        Default: the scenario's built-in world (the office unless it names another).
 
     Raises
     ------
@@ -227,7 +263,7 @@ def build_scenario(
         raise SimulationError(
             f"the duration must be a positive number of seconds, got {duration_s}"
         )
-    base = world or load_default_world()
+    base = world or (load_builtin_world(spec.world) if spec.world else load_default_world())
     surveyed = base.model_copy(
         update={"tags": tuple(t for t in base.tags if t.id not in spec.remove_tags)}
     )
@@ -247,7 +283,20 @@ def build_scenario(
         stamps = stamps[(stamps < lo) | (stamps > hi)]
     obs = ObservationConfig(seed=seed, **spec.observation)
     tag_map = tag_map_from_world(surveyed)
-    return Scenario(name, drive, obs, true_world, tag_map, stamps, kidnaps, spec.faults)
+    people = true_world.people
+    if spec.crowd_fraction is not None:
+        people = (*people, *_crowd(drive, spec.crowd_fraction, seed))
+    return Scenario(
+        name, drive, obs, true_world, tag_map, stamps, kidnaps, spec.faults, tuple(people)
+    )
+
+
+def _crowd(drive: Drive, fraction: float, seed: int) -> tuple[Person, ...]:
+    """People walking with the robot's true path (sampled every 0.5 s), times after t0."""
+    stamps = np.arange(int(drive.stamps_ns[0]), int(drive.stamps_ns[-1]) + S_NS, S_NS // 2)
+    truth = drive.ground_truth_at(stamps)
+    t_s = (stamps - drive.t0_ns) * 1e-9
+    return crowd_around(truth.xy_yaw_map_base, t_s, fraction, seed=seed)
 
 
 def _move_tags(world: World, moves: dict[int, tuple[float, float]]) -> World:
@@ -304,10 +353,13 @@ def truncate_drive(drive: Drive, duration_s: float) -> Drive:
 class ScenarioSource:
     """A scenario as a :class:`~tagloc.messages.MessageSource` (the simulator's stream).
 
-    Yields, in stamp order: the camera's ``CameraInfoMsg`` and the static ``base -> camera``
-    transform at the start, then per odometry stamp an ``OdometryMsg`` and a ``GroundTruthMsg``,
-    and per camera frame a ``TagDetectionsMsg`` (before the odometry of the same stamp, as a
-    bag's log-time order has it); then the scenario's ``faults`` rewrite that stream.
+    Yields, in arrival order: the camera's ``CameraInfoMsg`` and the static ``base -> camera``
+    transform at the start (and ``base -> lidar`` when the robot has a lidar), then per odometry
+    stamp an ``OdometryMsg`` and a ``GroundTruthMsg``, per camera frame a ``TagDetectionsMsg``
+    (before the odometry of the same stamp, as a bag's log-time order has it) and per lidar
+    sweep a ``PointCloudMsg`` on ``topics.lidar`` (stamped at the sweep's start, delivered at its
+    end, before the odometry of that stamp; simulated lazily as the stream is read:
+    :mod:`tagloc.sim.lidar`); then the scenario's ``faults`` rewrite that stream.
     :attr:`frame_truth` holds what only the simulator knows (glints, tags truly in view).
     """
 
@@ -329,15 +381,23 @@ class ScenarioSource:
         robot = scenario.world.robot
         self.camera = robot.camera.camera_model()
         self.T_base_cam = robot.camera.T_base_cam.T_base_cam()
+        self.lidar: LidarSimulator | None = None
+        if robot.lidar is not None:
+            self.lidar = LidarSimulator(
+                robot.lidar, scenario.world.walls_in_map(), scenario.people, drive.t0_ns
+            )
 
     @property
     def topics(self) -> dict[str, type[Message]]:
         """Stream topic -> record type."""
         t = self.t
-        return {
+        topics: dict[str, type[Message]] = {
             t.odom: OdometryMsg, t.truth: GroundTruthMsg, t.detections: TagDetectionsMsg,
             t.camera_info: CameraInfoMsg, TF_STATIC: TransformMsg,
         }  # fmt: skip
+        if self.lidar is not None:
+            topics[t.lidar] = PointCloudMsg
+        return topics
 
     def __iter__(self) -> Iterator[tuple[str, Message]]:
         t0 = int(self.scenario.drive.stamps_ns[0])
@@ -348,12 +408,22 @@ class ScenarioSource:
         t0 = int(drive.stamps_ns[0])
         yield t.camera_info, CameraInfoMsg(t0, CAMERA_FRAME, self.camera.to_camera_info())
         yield TF_STATIC, TransformMsg(t0, BASE_FRAME, CAMERA_FRAME, self.T_base_cam, static=True)
+        sweeps: Iterator[Sweep] = iter(())
+        if self.lidar is not None:
+            T_base_lidar = self.lidar.T_base_lidar
+            yield TF_STATIC, TransformMsg(t0, BASE_FRAME, LIDAR_FRAME, T_base_lidar, static=True)
+            starts = self.lidar.sweep_starts_ns(t0, int(drive.stamps_ns[-1]))
+            sweeps = self.lidar.sweeps(lambda st: drive.ground_truth_at(st).xy_yaw_map_base, starts)
+        sweep = next(sweeps, None)
         frames = iter(self.frames)
         frame = next(frames, None)
         for i, stamp in enumerate(drive.stamps_ns.tolist()):
             while frame is not None and frame.stamp_ns <= stamp:  # arrival order = stamp order
                 yield t.detections, TagDetectionsMsg(frame.stamp_ns, CAMERA_FRAME, frame.detections)
                 frame = next(frames, None)
+            while sweep is not None and sweep.end_ns <= stamp:  # delivered when complete
+                yield t.lidar, sweep.msg
+                sweep = next(sweeps, None)
             T = drive.T_odom_base[i]
             yield t.odom, OdometryMsg(stamp, ODOM_FRAME, BASE_FRAME, T, _ODOM_COV)
             yield t.truth, GroundTruthMsg(stamp, MAP_FRAME, drive.T_map_base[i])

@@ -34,6 +34,7 @@ from tagloc.config import (
 from tagloc.errors import SimulationError
 from tagloc.geometry import SE3, SO3
 from tagloc.sim.odometry import ODOMETRY_MODELS
+from tagloc.sim.people import Person
 from tagloc.sim.robot import Robot
 from tagloc.sim.route import MAX_COORDINATE_M, RouteConfig
 from tagloc.sim.route_budget import check_route_budget
@@ -231,6 +232,8 @@ class World(StrictModel):
     checkpoints: tuple[Checkpoint, ...] = ()
     route: RouteConfig
     robot: Robot
+    #: People walking about (lidar occluders only; :mod:`tagloc.sim.people`).
+    people: tuple[Person, ...] = ()
 
     @model_validator(mode="after")
     def _cross_references(self) -> World:
@@ -337,5 +340,23 @@ def load_world(path: str | os.PathLike[str]) -> World:
 
 def load_default_world() -> World:
     """The built-in office world, ``tagloc/sim/worlds/office.yaml``."""
-    text = resources.files("tagloc.sim").joinpath("worlds/office.yaml").read_text(encoding="utf-8")
-    return World.from_yaml_text(text, source="tagloc/sim/worlds/office.yaml")
+    return load_builtin_world("office")
+
+
+#: The built-in worlds (``tagloc/sim/worlds/<name>.yaml``); each file documents itself.
+BUILTIN_WORLDS = ("office", "glass_corridor", "mirrored_lobby", "long_corridor")
+
+
+def load_builtin_world(name: str) -> World:
+    """A built-in world by name (one of :data:`BUILTIN_WORLDS`).
+
+    Raises
+    ------
+    SimulationError
+        For an unknown name.
+    """
+    if name not in BUILTIN_WORLDS:
+        raise SimulationError(f"no built-in world {short_repr(name)} (known: {', '.join(BUILTIN_WORLDS)})")
+    path = f"worlds/{name}.yaml"
+    text = resources.files("tagloc.sim").joinpath(path).read_text(encoding="utf-8")
+    return World.from_yaml_text(text, source=f"tagloc/sim/{path}")
