@@ -36,5 +36,13 @@ class LidarConfig(StrictModel):
     #: sees a tag of the map frame again.
     ignore_in_cab: bool = True
     cab_frame: str = Field("elevator_cab", min_length=1, max_length=200)
+    #: Floor of a fix's covariance along its measured directions (1-sigma, m and rad): the
+    #: registration's covariance (Hessian from thousands of points) shrinks below the
+    #: errors that do not average out over points (the premap's surfaces, de-skew, the
+    #: mount); the isotropic floor ``diag(min_sigma_m^2 I3, min_sigma_rad^2 I3)`` projected
+    #: on the measured directions is added to it. Calibrated with the NEES of the fixes
+    #: against the simulator's truth (README, the node section).
+    min_sigma_m: float = Field(0.003, ge=0, le=10)
+    min_sigma_rad: float = Field(0.001, ge=0, le=1)
     #: Registration, acceptance and degeneracy of one fix (:mod:`tagloc.lidar.fix`).
     fix: LidarFixConfig = LidarFixConfig()

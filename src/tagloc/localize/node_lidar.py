@@ -205,8 +205,10 @@ class LidarScans:
             self._held.hold(_attempt(stamp, fix.T_map_base, None, f"rejected:{fix.rejected}"))
             self.supervisor.on_fix(LIDAR, False, math.nan, math.nan)
             return None
+        B = fix.basis
+        floor = np.diag([cfg.min_sigma_m**2] * 3 + [cfg.min_sigma_rad**2] * 3)
         partial = PartialFix(
-            stamp, fix.T_map_base, fix.basis, fix.covariance_k, LIDAR,
+            stamp, fix.T_map_base, B, fix.covariance_k + B.T @ floor @ B, LIDAR,
             FixQuality(math.nan, 0, math.nan),
         )  # fmt: skip
         event = self.filter.update_partial(partial)
