@@ -42,7 +42,7 @@ class LidarConfig(StrictModel):
     #: mount); the isotropic floor ``diag(min_sigma_m^2 I3, min_sigma_rad^2 I3)`` projected
     #: on the measured directions is added to it. Calibrated with the NEES of the fixes
     #: against the simulator's truth (README, the node section).
-    min_sigma_m: float = Field(0.003, ge=0, le=10)
-    min_sigma_rad: float = Field(0.001, ge=0, le=1)
+    min_sigma_m: float = Field(0.004, ge=0, le=10)
+    min_sigma_rad: float = Field(0.002, ge=0, le=1)
     #: Registration, acceptance and degeneracy of one fix (:mod:`tagloc.lidar.fix`).
     fix: LidarFixConfig = LidarFixConfig()
