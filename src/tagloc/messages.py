@@ -315,6 +315,13 @@ class PointCloudMsg:
                 raise RecordError("PointCloudMsg.time_offset_s: must be finite and >= 0")
             _set(self, name, values)
 
+    def last_point_ns(self) -> int:
+        """When the last point was measured, ns: the earliest a driver can publish the sweep
+        (``stamp_ns`` without time offsets or points)."""
+        if self.time_offset_s is None or not len(self.points):
+            return self.stamp_ns
+        return self.stamp_ns + round(float(self.time_offset_s.max()) * 1e9)
+
 
 #: Any record of the stream.
 Message: TypeAlias = (

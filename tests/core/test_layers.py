@@ -1,8 +1,8 @@
 """The package layers of DESIGN.md: each imports only from the layers above it.
 
 Order (top first): errors, fileutil, _yaml_loader, config; geometry; frames; camera; tags;
-messages; lidar; mapping; supervise; localize; sim; eval; io; adapters; cli. ``supervise`` sits above
-``localize``: the supervisor's health and ladder policy are generic over fix sources, and the
+messages; lidar; mapping; supervise; localize; sim; eval; io; adapters; cli. ``supervise`` sits
+above ``localize``: the supervisor's health and ladder policy are generic over fix sources, and the
 streaming node in ``localize`` drives it. Imports under ``if TYPE_CHECKING:`` count too (they
 are real coupling).
 """
@@ -18,8 +18,8 @@ SRC = Path(__file__).resolve().parents[2] / "src" / "tagloc"
 ORDER = [
     ("errors", "fileutil", "_yaml_loader", "config"), ("geometry",), ("frames",), ("camera",),
     ("tags",),
-    ("messages",), ("lidar",), ("mapping",), ("supervise",), ("localize",), ("sim",), ("eval",), ("io",),
-    ("adapters",), ("cli",),
+    ("messages",), ("lidar",), ("mapping",), ("supervise",), ("localize",), ("sim",), ("eval",),
+    ("io",), ("adapters",), ("cli",),
 ]  # fmt: skip
 RANK = {name: rank for rank, names in enumerate(ORDER) for name in names}
 #: Imports against the order that are known and allowed, each with its reason (the list can only

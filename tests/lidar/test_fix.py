@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from lidar_scenes import box_room, corridor, scan, surface
-from scipy import stats
 
+from tagloc.errors import GeometryError
 from tagloc.geometry import SE3
 from tagloc.lidar import LidarFixConfig, Target, lidar_fix
 
@@ -61,8 +61,10 @@ def test_corridor_fix_does_not_report_the_corridor_axis(corridor_target: Target)
     assert abs(error_map[1]) < 0.005 and abs(error_map[2]) < 0.005  # across: corrected
 
 
-def _nees(target: Target, rects, n: int, rng: np.random.Generator, room: bool) -> np.ndarray:
-    values, config = [], LidarFixConfig()
+def _nees(
+    target: Target, rects, n: int, rng: np.random.Generator, room: bool, inflation: float
+) -> np.ndarray:
+    values, config = [], LidarFixConfig(covariance_inflation=inflation)
     for _ in range(n):
         xy = (rng.uniform(2.5, 5.5), rng.uniform(2.0, 4.0)) if room else (rng.uniform(-5, 5), 1.25)
         T_map_base = SE3.from_rotvec([0, 0, rng.uniform(-np.pi, np.pi)], [*xy, 0.5])
@@ -74,29 +76,39 @@ def _nees(target: Target, rects, n: int, rng: np.random.Generator, room: bool) -
     return np.array(values)
 
 
-def _check_nees(values: np.ndarray, dof: int) -> None:
-    """Mean NEES within the two-sided 99 % band of chi2(n dof) / n, widened to [0.5, 1.5] dof
-    (the default inflation is one number for rooms and corridors)."""
-    n = len(values)
+def _check_nees(values: np.ndarray, dof: int, band: tuple[float, float]) -> None:
     assert (values[:, 1] == dof).all()
-    low, high = stats.chi2.ppf([0.005, 0.995], n * dof) / n
     mean = values[:, 0].mean()
-    assert min(low, 0.5 * dof) <= mean <= max(high, 1.5 * dof), (mean, dof)
+    assert band[0] * dof <= mean <= band[1] * dof, (mean, dof)
 
 
-@pytest.mark.parametrize(
-    "n", [pytest.param(12, id="short"), pytest.param(150, marks=pytest.mark.slow)]
-)
-def test_covariance_is_honest_in_a_room(room_target: Target, n: int) -> None:
-    _check_nees(_nees(room_target, box_room(), n, np.random.default_rng([SEED, n]), True), 6)
+#: (scans, band of mean NEES / dof at inflation 1). The short run's band is wider (a mean of 15
+#: chi2(6) draws has a standard deviation of 0.37 dof); measured: room 0.92, corridor 0.99 (40).
+RUNS = [
+    pytest.param(15, (0.5, 1.6), id="short"),
+    pytest.param(150, (0.7, 1.3), marks=pytest.mark.slow),
+]
 
 
-@pytest.mark.parametrize(
-    "n", [pytest.param(12, id="short"), pytest.param(150, marks=pytest.mark.slow)]
-)
-def test_covariance_is_honest_in_a_corridor(corridor_target: Target, n: int) -> None:
-    values = _nees(corridor_target, corridor(), n, np.random.default_rng([SEED, n]), False)
-    _check_nees(values, 5)
+@pytest.mark.parametrize(("n", "band"), RUNS)
+def test_covariance_is_honest_in_a_room(room_target: Target, n: int, band) -> None:
+    rng = np.random.default_rng([SEED, n])
+    _check_nees(_nees(room_target, box_room(), n, rng, True, 1.0), 6, band)
+
+
+@pytest.mark.parametrize(("n", "band"), RUNS)
+def test_covariance_is_honest_in_a_corridor(corridor_target: Target, n: int, band) -> None:
+    rng = np.random.default_rng([SEED, n])
+    _check_nees(_nees(corridor_target, corridor(), n, rng, False, 1.0), 5, band)
+
+
+def test_the_default_inflation_scales_the_covariance(room_target: Target) -> None:
+    rng = np.random.default_rng(SEED)
+    T_map_base = SE3.from_rotvec([0, 0, 1.0], [4.0, 3.0, 0.5])
+    points = scan(box_room(), T_map_base, rng)
+    one = lidar_fix(points, room_target, T_map_base, LidarFixConfig(covariance_inflation=1.0))
+    default = lidar_fix(points, room_target, T_map_base, LidarFixConfig())
+    np.testing.assert_allclose(default.covariance_k, 1.5 * one.covariance_k, rtol=1e-12)
 
 
 @pytest.mark.parametrize(
@@ -124,3 +136,8 @@ def test_a_scan_of_somewhere_else_is_rejected(room_target: Target) -> None:
     points = scan(box_room(30.0, 20.0, 3.0), SE3.from_rotvec([0, 0, 0.2], [12, 9, 0.5]), rng)
     fix = lidar_fix(points, room_target, T_map_base, LidarFixConfig())
     assert fix.rejected is not None and fix.rejected.startswith("low inlier fraction")
+
+
+def test_points_of_the_wrong_shape_are_refused(room_target: Target) -> None:
+    with pytest.raises(GeometryError, match=r"points_base must have shape \(N, 3\)"):
+        lidar_fix(np.zeros((500, 2)), room_target, SE3.identity(), LidarFixConfig())

@@ -20,12 +20,13 @@ def room() -> tuple[np.ndarray, Target]:
     return premap, Target.from_points(premap, RegistrationConfig())
 
 
-def test_room_recovers_a_perturbation(room: tuple[np.ndarray, Target]) -> None:
+@pytest.mark.parametrize("kernel", ["GICP", "PLANE_ICP"])
+def test_room_recovers_a_perturbation(room: tuple[np.ndarray, Target], kernel: str) -> None:
     rng = np.random.default_rng(SEED)
     T_map_lidar = SE3.from_rotvec([0.01, -0.02, 0.7], [3.0, 2.5, 0.5])
     points = scan(box_room(), T_map_lidar, rng)
     init = T_map_lidar.compose(SE3.exp([0.25, -0.2, 0.1, 0.02, -0.02, 0.08]))
-    reg = register(points, room[1], init, RegistrationConfig())
+    reg = register(points, room[1], init, RegistrationConfig(kernel=kernel, max_iterations=60))
     error = T_map_lidar.inverse().compose(reg.T_target_source).log()
     assert reg.converged
     assert np.linalg.norm(error[:3]) < 0.01  # m

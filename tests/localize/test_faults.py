@@ -19,7 +19,7 @@ import pytest
 from tagloc.localize.outputs import RunRecorder
 from tagloc.localize.pipeline import LocalizationPipeline
 from tagloc.localize.run import LocalizationRun
-from tagloc.messages import ImageMsg, Message, OdometryMsg, TagDetectionsMsg
+from tagloc.messages import ImageMsg, Message, OdometryMsg, PointCloudMsg, TagDetectionsMsg
 from tagloc.sim.scenarios import (
     SCENARIOS,
     ScenarioSource,
@@ -215,8 +215,11 @@ def test_duplicated_messages_are_counted_and_change_nothing(clean: FaultRun) -> 
     odom, frames = stamps_of(clean.stream, OdometryMsg), stamps_of(clean.stream, TagDetectionsMsg)
     n_odom = int(((odom >= lo) & (odom < hi)).sum())
     n_frames = int(((frames >= lo) & (frames < hi)).sum())
-    assert (n_odom, n_frames) == (1000, 300)
-    assert len(r.stream) - len(clean.stream) == 2 * n_odom + n_frames  # odometry and its truth
+    clouds = stamps_of(clean.stream, PointCloudMsg)
+    n_clouds = int(((clouds >= lo) & (clouds < hi)).sum())
+    assert (n_odom, n_frames, n_clouds) == (1000, 300, 100)
+    # odometry and its truth, frames, lidar sweeps (which the node ignores: not counted below)
+    assert len(r.stream) - len(clean.stream) == 2 * n_odom + n_frames + n_clouds
     assert r.run.metadata["skipped"] == {
         "odom_duplicate_stamp": n_odom, "frame_duplicate_stamp": n_frames,
     }  # fmt: skip

@@ -3,8 +3,10 @@
 ``tagloc sim record --scenario NAME --out drive.mcap`` writes the scenario's message stream, the
 same one ``tagloc localize --scenario`` consumes: ``/odom`` (``nav_msgs/Odometry``, odom ->
 base_link), ``/tag_detections`` (pre-detected corners, ``apriltag_msgs/AprilTagDetectionArray``
-layout), ``/camera/camera_info``, ``/tf_static`` (base_link -> camera_optical) and the ground truth
-on its own topic ``/ground_truth`` (``geometry_msgs/PoseStamped`` of base_link in map). The tag map
+layout), ``/camera/camera_info``, ``/tf_static`` (base_link -> camera_optical, base_link -> lidar),
+the lidar's raw sweeps ``/lidar/points`` (``sensor_msgs/PointCloud2``, logged when each sweep is
+complete) when the world's robot has a lidar, and the ground truth on its own topic
+``/ground_truth`` (``geometry_msgs/PoseStamped`` of base_link in map). The tag map
 the localizer should use is written beside it (``--tags-out``, default ``tags.yaml`` next to the
 bag). ``--format`` picks MCAP, a ROS 2 bag directory or a ROS 1 ``.bag``; it must fit the name
 (``.mcap``, a directory, ``.bag``). Both outputs are checked before the drive is simulated; they
@@ -41,7 +43,7 @@ def sim_record(
         Path | None, typer.Option(help="Tag map to write (default: tags.yaml beside the bag).")
     ] = None,
 ) -> None:
-    """Record a simulated scenario (odometry, tag detections, camera, truth) to a bag."""
+    """Record a simulated scenario (odometry, tag detections, camera, lidar, truth) to a bag."""
     from tagloc.fileutil import atomic_write_text, check_outputs
     from tagloc.io import bag_output_format, check_bag_target, is_ros2_bag_directory
 

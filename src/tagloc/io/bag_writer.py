@@ -247,9 +247,7 @@ class BagSink:
 
 
 def _log_time(msg: Message) -> int:
-    if isinstance(msg, PointCloudMsg) and msg.time_offset_s is not None and len(msg.points):
-        return msg.stamp_ns + round(float(msg.time_offset_s.max()) * 1e9)
-    return msg.stamp_ns
+    return msg.last_point_ns() if isinstance(msg, PointCloudMsg) else msg.stamp_ns
 
 
 def _is_static(topic: str) -> bool:

@@ -96,7 +96,7 @@ def read_ply(path: PathArg) -> np.ndarray:
     count, element, fmt = -1, "", ""
     for line in lines[1:]:
         words = line.split()
-        if not words or words[0] in ("comment", "obj_info"):
+        if not words or words[0] in ("comment", "obj_info", "end_header"):
             continue
         if words[0] == "format":
             fmt = words[1] if len(words) > 1 else ""

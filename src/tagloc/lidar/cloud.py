@@ -27,9 +27,10 @@ def _points(points: npt.ArrayLike, name: str = "points") -> np.ndarray:
 
 
 def finite_points(points: npt.ArrayLike) -> np.ndarray:
-    """``(M, 3)`` float64 copy of ``points`` (``(N, 3)``) without the rows holding NaN or inf.
+    """``(M, 3)`` float64 ``points`` (``(N, 3)``) without the rows holding NaN or inf.
 
     A lidar marks "no return" with NaN rows (ROS ``PointCloud2`` with ``is_dense: false``).
+    A float64 input without such rows is returned as is (not copied).
 
     Raises
     ------
@@ -37,7 +38,8 @@ def finite_points(points: npt.ArrayLike) -> np.ndarray:
         ``points`` is not ``(N, 3)`` (an empty array is accepted and gives ``(0, 3)``).
     """
     array = _points(points)
-    return np.array(array[np.isfinite(array).all(axis=1)])
+    finite = np.isfinite(array).all(axis=1)
+    return array if finite.all() else np.array(array[finite])
 
 
 def deskew(

@@ -1,10 +1,12 @@
-"""Simulation: world files, ground-truth trajectories, odometry drift models and drives.
+"""Simulation: world files, ground-truth trajectories, odometry drift models, drives and the
+lidar.
 
 >>> from tagloc.sim import load_default_world, simulate_drive
 >>> drive = simulate_drive(load_default_world(), seed=1)  # doctest: +SKIP
 """
 
 from tagloc.sim.drive import Drive, simulate_drive
+from tagloc.sim.lidar import LidarSimulator, Sweep, premap_from_world
 from tagloc.sim.observations import (
     ObservationConfig,
     ObservedFrame,
@@ -18,8 +20,10 @@ from tagloc.sim.odometry import (
     WheelOdometryConfig,
     simulate_odometry,
 )
+from tagloc.sim.people import Person, RandomWalk
 from tagloc.sim.render import RenderedFrame, TagTruth, render_frames, render_tags_scene, render_view
 from tagloc.sim.render_config import RenderConfig
+from tagloc.sim.robot import LidarConfig, LidarMount
 from tagloc.sim.route import RouteConfig
 from tagloc.sim.trajectory import (
     RoutePlan,
@@ -28,19 +32,33 @@ from tagloc.sim.trajectory import (
     plan_from_config,
     plan_route,
 )
-from tagloc.sim.world import Tag, World, load_default_world, load_world
+from tagloc.sim.world import (
+    BUILTIN_WORLDS,
+    Tag,
+    World,
+    load_builtin_world,
+    load_default_world,
+    load_world,
+)
 
 __all__ = [
+    "BUILTIN_WORLDS",
     "ODOMETRY_MODELS",
     "DriftParameters",
     "Drive",
     "LeggedOdometryConfig",
+    "LidarConfig",
+    "LidarMount",
+    "LidarSimulator",
     "ObservationConfig",
     "ObservedFrame",
+    "Person",
+    "RandomWalk",
     "RenderConfig",
     "RenderedFrame",
     "RouteConfig",
     "RoutePlan",
+    "Sweep",
     "Tag",
     "TagSighting",
     "TagTruth",
@@ -48,10 +66,12 @@ __all__ = [
     "WheelOdometryConfig",
     "World",
     "generate_trajectory",
+    "load_builtin_world",
     "load_default_world",
     "load_world",
     "plan_from_config",
     "plan_route",
+    "premap_from_world",
     "render_frames",
     "render_tags_scene",
     "render_view",

@@ -10,7 +10,9 @@ and a message belongs to a window by its own (original) stamp.
 The fault scenarios of :data:`~tagloc.sim.scenarios.SCENARIOS`, the ladder walk each must
 produce, and the walk measured (seed 0, the first 60 s of the office route; the tests are in
 ``tests/localize/test_faults.py``). The node starts at level 4 and reaches level 3
-(``markers_alone``: the simulator has no lidar) at its first fix, 6.20 s in:
+(``markers_alone``: the node does not use the simulator's lidar yet) at its first fix, 6.20 s
+in. Lidar point clouds (:class:`~tagloc.messages.PointCloudMsg`) are records like any other: a
+fault with no ``kinds`` hits them too, and ``lidar_unplugged`` drops them alone.
 
 ===================  ============================================================================
 camera_unplugged     no ``TagDetectionsMsg`` from 30 s to 50 s (tags in view before and after).
@@ -33,7 +35,8 @@ clock_jump_back      from 45 s on, odometry stamps are 5 s earlier (a restarted 
                      first odometry stamp after the jump (40.00 s) with "clock jumped back
                      4.990 s"; the camera then runs 5 s ahead of the odometry, which the
                      supervisor sees as silent odometry at every frame: 4 while that lasts.
-duplicated_messages  every message from 30 s to 40 s sent twice. Expected and measured: 1000
+duplicated_messages  every message from 30 s to 40 s sent twice (100 lidar sweeps among them,
+                     which the node ignores). Expected and measured: 1000
                      ``odom_duplicate_stamp`` and 300 ``frame_duplicate_stamp`` skips; the walk
                      (3 at 6.20 s, no other move) and the fused trajectory bit-identical to the
                      drive without duplicates.

@@ -19,7 +19,6 @@ Noise: the measured range is the true one plus ``N(0, range_sigma_m)``; sweep ``
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 
@@ -40,6 +39,7 @@ from tagloc.sim.lidar_cast import (
 )
 from tagloc.sim.people import Person, people_xy
 from tagloc.sim.robot import LidarConfig
+from tagloc.sim.world import Wall, World
 
 __all__ = ["LIDAR_FRAME", "LidarSimulator", "Sweep", "premap_from_world", "voxel_centroids"]
 
@@ -69,7 +69,9 @@ class Sweep:
     R_map_lidar, t_map_lidar : (C, 3, 3), (C, 3) float
         The scanner's true pose when each column fired (see :attr:`T_map_lidar`).
     end_ns : int
-        When the sweep ends (and a driver publishes it).
+        When the sweep ends: its last column fires (a driver publishes the sweep once its last
+        point is measured, ``msg.last_point_ns()``, which is this unless that column returned
+        nothing).
     """
 
     msg: PointCloudMsg
@@ -102,7 +104,7 @@ class LidarSimulator:
     def __init__(
         self,
         config: LidarConfig,
-        walls: Sequence[object],
+        walls: Sequence[Wall],
         people: Sequence[Person] = (),
         t0_ns: int = 0,
     ) -> None:
@@ -118,7 +120,11 @@ class LidarSimulator:
         ce = np.cos(el)
         # (columns, rings, 3) unit beam directions in the scanner frame
         self.directions_lidar = np.stack(
-            [np.cos(az)[:, None] * ce, np.sin(az)[:, None] * ce, np.broadcast_to(np.sin(el), (len(az), len(el)))],
+            [
+                np.cos(az)[:, None] * ce,
+                np.sin(az)[:, None] * ce,
+                np.broadcast_to(np.sin(el), (len(az), len(el))),
+            ],
             axis=-1,
         )
         self.column_offsets_s = config.column_offsets_s()
@@ -155,7 +161,7 @@ class LidarSimulator:
             glass = rng.random(columns * rings) < cfg.glass_return_probability
         cylinders = None
         if self.people:
-            t_s = (stamps - self.t0_ns) * 1e-9
+            t_s = ((stamps - self.t0_ns) * 1e-9).astype(np.float64)
             centre = np.repeat(people_xy(self._people_wp, t_s), rings, axis=0)
             cylinders = Cylinders(centre, self._radius, self._height)
         cast = cast_rays(
@@ -164,7 +170,11 @@ class LidarSimulator:
             level_group=rings if self._level else 0,
         )  # fmt: skip
         measured = cast.range_m + noise
-        keep = np.isfinite(cast.range_m) & (measured >= cfg.min_range_m) & (measured <= cfg.max_range_m)
+        keep = (
+            np.isfinite(cast.range_m)
+            & (measured >= cfg.min_range_m)
+            & (measured <= cfg.max_range_m)
+        )
         beams = np.flatnonzero(keep)
         points = measured[beams, None] * self.directions_lidar.reshape(-1, 3)[beams]
         intensity = np.array([_INTENSITY.get(int(k), 0.0) for k in range(5)])[cast.kind[beams]]
@@ -174,7 +184,7 @@ class LidarSimulator:
             int(start_ns), LIDAR_FRAME, points.astype(np.float32), intensity.astype(np.float32),
             offsets.astype(np.float32),
         )  # fmt: skip
-        end = int(start_ns) + self.period_ns
+        end = int(start_ns) + round(float(np.float32(self.column_offsets_s[-1])) * S_NS)
         return Sweep(msg, cast, beams, R, origins_c, end)
 
     def sweeps(
@@ -188,8 +198,9 @@ class LidarSimulator:
             knots = np.concatenate([self._knots(int(s)) for s in chunk])
             table = np.asarray(xy_yaw_at(knots), dtype=np.float64)
             for i, start in enumerate(chunk.tolist()):
-                rows = table[i * _KNOTS : (i + 1) * _KNOTS]
-                yield self.sweep(lambda _, rows=rows: rows, start, first_index + lo + i)
+                yield self.sweep(
+                    _Table(table[i * _KNOTS : (i + 1) * _KNOTS]), start, first_index + lo + i
+                )
 
     def _knots(self, start_ns: int) -> npt.NDArray[np.int64]:
         last = start_ns + round(float(self.column_offsets_s[-1]) * S_NS)
@@ -225,26 +236,48 @@ class LidarSimulator:
         directions = d_lidar @ T_map_lidar.rotation.matrix.T
         origins = np.broadcast_to(np.asarray(T_map_lidar.translation), directions.shape)
         cfg = self.config
-        cast = cast_rays(origins, directions, self.segments, cfg.max_range_m, max_bounces=cfg.max_bounces)
+        level = abs(T_map_lidar.rotation.matrix[2, 2] - 1.0) < 1e-12
+        rings = self.directions_lidar.shape[1]
+        cast = cast_rays(
+            origins, directions, self.segments, cfg.max_range_m, max_bounces=cfg.max_bounces,
+            level_group=rings if level else 0,
+        )  # fmt: skip
         ok = np.isfinite(cast.range_m) & (cast.range_m >= cfg.min_range_m)
         return np.asarray(T_map_lidar.act(cast.range_m[ok, None] * d_lidar[ok])), cast
 
 
+@dataclass(frozen=True, slots=True)
+class _Table:
+    """A :data:`PoseFunction` returning poses already sampled at a sweep's knots."""
+
+    rows: FloatArray
+
+    def __call__(self, stamps_ns: npt.NDArray[np.int64]) -> FloatArray:
+        return self.rows
+
+
 def voxel_centroids(points: FloatArray, voxel_m: float) -> FloatArray:
-    """The centroid of the points in each occupied ``voxel_m`` cube (a plain numpy voxel grid)."""
+    """The centroid of the points in each occupied ``voxel_m`` cube (a plain numpy voxel grid).
+
+    The cubes are centred on multiples of ``voxel_m``, so a wall on a round coordinate (x = 0,
+    y = 9.0) falls in the middle of a layer of cubes, not on a boundary between two."""
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if not len(pts):
         return pts.copy()
-    keys = np.floor(pts / voxel_m).astype(np.int64)
-    _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    keys = np.floor(pts / voxel_m + 0.5).astype(np.int64)  # centred on multiples of voxel_m
+    keys -= keys.min(axis=0)
+    if keys.max() < 2**21:  # one int64 per voxel: a 1D unique, much faster than rows
+        flat = (keys[:, 0] << 42) | (keys[:, 1] << 21) | keys[:, 2]
+        _, inverse, counts = np.unique(flat, return_inverse=True, return_counts=True)
+    else:
+        _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
     inverse = inverse.reshape(-1)
-    sums = np.zeros((len(counts), 3))
-    np.add.at(sums, inverse, pts)
+    sums = np.stack([np.bincount(inverse, pts[:, k], len(counts)) for k in range(3)], axis=1)
     return np.asarray(sums / counts[:, None])
 
 
 def premap_from_world(
-    world: object,
+    world: World,
     T_map_base: SE3,
     *,
     config: LidarConfig | None = None,
@@ -274,10 +307,10 @@ def premap_from_world(
     ValueError
         If neither ``config`` nor the world's robot has a lidar.
     """
-    config = config or world.robot.lidar  # type: ignore[attr-defined]
+    config = config or world.robot.lidar
     if config is None:
         raise ValueError("premap_from_world: the world's robot has no lidar; pass config=")
-    sim = LidarSimulator(config, world.walls_in_map())  # type: ignore[attr-defined]
+    sim = LidarSimulator(config, world.walls_in_map())
     xy = np.asarray(T_map_base.translation).reshape(-1, 3)[:, :2]
     travelled = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))])
     marks = np.floor(travelled / every_m)
@@ -285,8 +318,3 @@ def premap_from_world(
     clouds = [sim.scan_at(T_map_base[int(i)])[0] for i in picks]
     merged = np.concatenate(clouds) if clouds else np.zeros((0, 3))
     return voxel_centroids(merged, voxel_m)
-
-
-def sweep_count(duration_s: float, rate_hz: float) -> int:
-    """Whole sweeps in ``duration_s``."""
-    return int(math.floor(duration_s * rate_hz + 1e-9))

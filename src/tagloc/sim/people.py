@@ -10,6 +10,7 @@ Times are seconds after the route start; positions ``(x, y)`` in ``map``, metres
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 
@@ -49,7 +50,7 @@ class RandomWalk(StrictModel):
     def waypoints(self) -> FloatArray:
         """(K, 3) ``[t_s, x, y]`` every 0.5 s."""
         rng = np.random.default_rng(self.seed)
-        n = int(math.ceil(self.duration_s / _WALK_STEP_S)) + 1
+        n = math.ceil(self.duration_s / _WALK_STEP_S) + 1
         heading = rng.uniform(-math.pi, math.pi) + np.cumsum(
             rng.normal(0.0, math.radians(self.turn_sigma_deg), n)
         )
@@ -82,7 +83,7 @@ class Person(StrictModel):
             if not self.path:
                 raise FieldPathError(("path",), "needs at least one waypoint")
             times = [p[0] for p in self.path]
-            if any(b <= a for a, b in zip(times, times[1:], strict=False)):
+            if any(b <= a for a, b in itertools.pairwise(times)):
                 raise FieldPathError(("path",), "waypoint times must increase")
         return self
 

@@ -226,7 +226,8 @@ class LidarConfig(StrictModel):
             raise FieldPathError(("vertical_fov_deg",), f"low {low} is above high {high}")
         if self.rings == 1 and low != high:
             raise FieldPathError(
-                ("vertical_fov_deg",), f"one ring needs low == high (e.g. [0, 0]), got {low}, {high}"
+                ("vertical_fov_deg",),
+                f"one ring needs low == high (e.g. [0, 0]), got {low}, {high}",
             )
         if self.rings > 1 and low == high:
             raise FieldPathError(("vertical_fov_deg",), f"{self.rings} rings need low < high")
@@ -259,7 +260,7 @@ class LidarConfig(StrictModel):
         """``(columns,)`` firing time of each column after the sweep start, seconds: the scanner
         turns at a constant rate, so a column fires when the turn reaches its azimuth."""
         turn = (self.azimuths_rad() - self.azimuths_rad()[0]) / (2 * math.pi)
-        return turn * self.period_s()
+        return np.asarray(turn * self.period_s(), dtype=np.float64)
 
 
 class Robot(StrictModel):

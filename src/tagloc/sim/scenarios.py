@@ -17,7 +17,16 @@ camera_unplugged, odometry_stall, clock_jump_back, duplicated_messages
               stream-level ``faults`` (:mod:`tagloc.sim.faults`, whose table gives the ladder
               walk each must produce): frames lost, odometry stalled, its clock jumping back,
               messages sent twice
+glass_corridor  (world ``glass_corridor``) glass on both sides: the lidar sees floor and end walls
+mirrored_lobby  (world ``mirrored_lobby``) a mirror wall: phantom lidar geometry behind it
+crowd         people walking with the robot hide ``crowd_fraction`` (45 %) of the lidar's beams
+lidar_unplugged  no ``PointCloudMsg`` from 30 s to 50 s (a ``DropMessages`` fault)
+long_corridor  (world ``long_corridor``) 120 m without doors, tags only near the ends
 ============  ===================================================================================
+
+Every scenario streams the lidar when its world's robot has one (all built-in worlds do):
+:class:`ScenarioSource` yields the sweeps of :mod:`tagloc.sim.lidar`, occluded by the world's and
+the scenario's people.
 
 Pure: the same name, seed and duration give the same scenario.
 """
@@ -66,6 +75,7 @@ __all__ = [
     "build_scenario",
     "localize_scenario",
     "run_scenario",
+    "scenario_premap",
     "tag_map_from_world",
     "truncate_drive",
 ]
@@ -147,8 +157,8 @@ SCENARIOS: dict[str, ScenarioSpec] = {
     # lidar scenarios (the world's robot carries the lidar; tags are unaffected by glass)
     "glass_corridor": ScenarioSpec(
         "a 40 m corridor walled with glass on both sides and nothing behind it: the lidar sees "
-        "the floor and, within 40 m, the end walls only, so it cannot fix the position across "
-        "or (far from the ends) along the corridor; tags on the glass carry the localization",
+        "the floor and the two solid end walls only, which fix the position along the corridor "
+        "and not across it; tags on the glass carry the localization",
         world="glass_corridor",
     ),
     "mirrored_lobby": ScenarioSpec(
@@ -167,8 +177,9 @@ SCENARIOS: dict[str, ScenarioSpec] = {
         faults=(DropMessages(30.0, 50.0, (PointCloudMsg,)),),
     ),
     "long_corridor": ScenarioSpec(
-        "a 60 m straight corridor without doors and with tags only at its ends: lidar "
-        "constrains the position across the corridor and the heading, not along it",
+        "a 120 m straight corridor without doors, tags only near its ends: over its middle 40 m "
+        "the lidar sees two parallel walls and the floor (the end walls beyond its 40 m range), "
+        "which fix the position across the corridor and the heading, not along it",
         world="long_corridor",
     ),
 }
@@ -227,6 +238,24 @@ def tag_map_from_world(world: World) -> TagMap:
     return TagMap.from_entries(
         TagEntry.from_pose(t.id, world.T_map_tag(t), t.size, family=t.family, note=t.note or "")
         for t in world.tags
+    )
+
+
+def scenario_premap(
+    scenario: Scenario, *, every_m: float = 0.5, voxel_m: float = 0.1
+) -> npt.NDArray[np.float64]:
+    """The true lidar premap of a scenario, as :func:`tag_map_from_world` is its true tag map:
+    :func:`~tagloc.sim.lidar.premap_from_world` of the world along the drive's ground truth
+    (scans every ``every_m`` of travel, no people, no noise; ``voxel_m`` cubes), ``(N, 3)`` in
+    ``map``, metres.
+
+    Raises
+    ------
+    ValueError
+        If the world's robot has no lidar.
+    """
+    return premap_from_world(
+        scenario.world, scenario.drive.T_map_base, every_m=every_m, voxel_m=voxel_m
     )
 
 
@@ -295,7 +324,7 @@ def _crowd(drive: Drive, fraction: float, seed: int) -> tuple[Person, ...]:
     """People walking with the robot's true path (sampled every 0.5 s), times after t0."""
     stamps = np.arange(int(drive.stamps_ns[0]), int(drive.stamps_ns[-1]) + S_NS, S_NS // 2)
     truth = drive.ground_truth_at(stamps)
-    t_s = (stamps - drive.t0_ns) * 1e-9
+    t_s = ((stamps - drive.t0_ns) * 1e-9).astype(np.float64)
     return crowd_around(truth.xy_yaw_map_base, t_s, fraction, seed=seed)
 
 
@@ -358,7 +387,8 @@ class ScenarioSource:
     stamp an ``OdometryMsg`` and a ``GroundTruthMsg``, per camera frame a ``TagDetectionsMsg``
     (before the odometry of the same stamp, as a bag's log-time order has it) and per lidar
     sweep a ``PointCloudMsg`` on ``topics.lidar`` (stamped at the sweep's start, delivered at its
-    end, before the odometry of that stamp; simulated lazily as the stream is read:
+    end: the time of its last point, ``last_point_ns()``, also the log time
+    :class:`~tagloc.io.BagSink` gives it; simulated lazily as the stream is read:
     :mod:`tagloc.sim.lidar`); then the scenario's ``faults`` rewrite that stream.
     :attr:`frame_truth` holds what only the simulator knows (glints, tags truly in view).
     """
@@ -418,12 +448,23 @@ class ScenarioSource:
         frames = iter(self.frames)
         frame = next(frames, None)
         for i, stamp in enumerate(drive.stamps_ns.tolist()):
-            while frame is not None and frame.stamp_ns <= stamp:  # arrival order = stamp order
-                yield t.detections, TagDetectionsMsg(frame.stamp_ns, CAMERA_FRAME, frame.detections)
-                frame = next(frames, None)
-            while sweep is not None and sweep.end_ns <= stamp:  # delivered when complete
-                yield t.lidar, sweep.msg
-                sweep = next(sweeps, None)
+            # frames arrive at their stamp, sweeps when complete, before the odometry of a stamp
+            while True:
+                t_frame = frame.stamp_ns if frame is not None else stamp + 1
+                t_sweep = sweep.msg.last_point_ns() if sweep is not None else stamp + 1
+                if min(t_frame, t_sweep) > stamp:
+                    break
+                if t_frame <= t_sweep:
+                    assert frame is not None
+                    yield (
+                        t.detections,
+                        TagDetectionsMsg(frame.stamp_ns, CAMERA_FRAME, frame.detections),
+                    )
+                    frame = next(frames, None)
+                else:
+                    assert sweep is not None
+                    yield t.lidar, sweep.msg
+                    sweep = next(sweeps, None)
             T = drive.T_odom_base[i]
             yield t.odom, OdometryMsg(stamp, ODOM_FRAME, BASE_FRAME, T, _ODOM_COV)
             yield t.truth, GroundTruthMsg(stamp, MAP_FRAME, drive.T_map_base[i])
@@ -545,4 +586,16 @@ def scenario_metadata(scenario: Scenario, source: ScenarioSource) -> dict[str, o
         "duration_s": float(scenario.drive.stamps_ns[-1] - scenario.drive.stamps_ns[0]) / S_NS,
         "n_camera_frames": len(source.frames), "glints_injected": int(glints),
         "world": scenario.world.name, "faults": [f.describe() for f in scenario.faults],
+        "lidar": _lidar_summary(scenario), "people": len(scenario.people),
     }  # fmt: skip
+
+
+def _lidar_summary(scenario: Scenario) -> str | None:
+    lidar = scenario.world.robot.lidar
+    if lidar is None:
+        return None
+    low, high = lidar.vertical_fov_deg
+    return (
+        f"{lidar.rings} rings x {lidar.columns} columns, {low:g} to {high:g} deg, "
+        f"{lidar.horizontal_fov_deg:g} deg, {lidar.rate_hz:g} Hz"
+    )

@@ -356,7 +356,9 @@ def load_builtin_world(name: str) -> World:
         For an unknown name.
     """
     if name not in BUILTIN_WORLDS:
-        raise SimulationError(f"no built-in world {short_repr(name)} (known: {', '.join(BUILTIN_WORLDS)})")
+        raise SimulationError(
+            f"no built-in world {short_repr(name)} (known: {', '.join(BUILTIN_WORLDS)})"
+        )
     path = f"worlds/{name}.yaml"
     text = resources.files("tagloc.sim").joinpath(path).read_text(encoding="utf-8")
     return World.from_yaml_text(text, source=f"tagloc/sim/{path}")
