@@ -552,13 +552,6 @@ def localize_scenario(
     return run
 
 
-def scenario_premap(scenario: Scenario) -> npt.NDArray[np.float64]:
-    """The truth premap of a scenario: the world's lidar scanned along the drive's true path
-    every 0.5 m, without people or noise (:func:`tagloc.sim.lidar.premap_from_world`), as a
-    survey with the scanner would have made it (mirrors' phantoms included)."""
-    return premap_from_world(scenario.world, scenario.drive.T_map_base)
-
-
 def calibrated_config(scenario: Scenario, config: LocalizerConfig) -> LocalizerConfig:
     """``config`` with the tag sensor's ``sigma_px`` set to the simulated detector's, unless
     the configuration sets ``tags.noise`` itself."""
