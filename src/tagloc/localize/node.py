@@ -394,5 +394,5 @@ class LocalizerNode(CameraFrames, LidarScans):
                        "transitions": ladder.transitions, "level": int(ladder.level)},
         }  # fmt: skip
         if self._premap is not None:
-            out["lidar"] = {"sweeps_thinned": self.lidar_counts["thinned"]}
+            out["lidar_source"] = {"sweeps_thinned": self.lidar_counts["thinned"]}
         return out
