@@ -40,9 +40,11 @@ def _lidar(run: LocalizationRun) -> list[FixAttempt]:
 
 
 def lidar_nees(name: str, duration_s: float | None, run: LocalizationRun) -> np.ndarray:
-    """NEES per measured direction of each accepted lidar fix against the simulator's truth at
-    its stamp: ``e^T C^+ e / k`` with ``e = Log(T_true^-1 T_fix)`` and ``C`` the covariance along
-    the measured directions (the run record's covariance without its unmeasured part)."""
+    """NEES per measured planar direction of each accepted lidar fix against the simulator's
+    truth at its stamp, as the planar filter uses the fix: ``y^T C^-1 y / k`` with
+    ``y = B^T e[x, y, yaw]``, ``e = Log(T_true^-1 T_fix)`` and ``(B, C)`` the fix's measured
+    directions and covariance (the run record's, without its unmeasured part) projected on the
+    plane (:func:`planar_constraint`)."""
     fixes = [a for a in _lidar(run) if a.accepted]
     drive = build_scenario(name, 0, duration_s).drive
     truth = drive.ground_truth_at(np.array([a.stamp_ns for a in fixes], dtype=np.int64))
@@ -50,9 +52,10 @@ def lidar_nees(name: str, duration_s: float | None, run: LocalizationRun) -> np.
     for a, T_true in zip(fixes, truth.T_map_base, strict=True):
         w, V = np.linalg.eigh(a.cov)
         measured = w < 0.01 * UNMEASURED_VAR
+        B, C = planar_constraint(V[:, measured], np.diag(w[measured]))
         e = np.asarray((T_true.inverse() @ a.T_map_base).log())
-        y = V[:, measured].T @ e
-        out.append(float(y @ (y / w[measured])) / int(measured.sum()))
+        y = B.T @ e[[0, 1, 5]]
+        out.append(float(y @ np.linalg.solve(C, y)) / B.shape[1])
     return np.array(out)
 
 
