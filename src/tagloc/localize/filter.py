@@ -535,7 +535,6 @@ class MapOdomFilter:
         self._X, self._c, self._P = self._iekf(cand, innov)
         self.revision += 1
         self._updated_ns = max(self._updated_ns, fix.stamp_ns)
-        self._sources.on_accepted(fix.source, innov.d2)
         if k == self.dof:
             if self._gap:
                 self._gap = False
