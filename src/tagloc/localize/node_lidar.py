@@ -172,8 +172,7 @@ class LidarScans:
         if self._last_odom is not None and self._last_odom - stamp > cfg.max_scan_age_s * S_NS:
             return self._skip("lidar_stale", f"sweep at {stamp} ns processed too late")
         if cfg.ignore_in_cab and self._in_cab:
-            self.skipped["in_cab"] += 1
-            return None
+            return self._skip("in_cab", f"sweep at {stamp} ns: the robot is in the cab")
         finite = np.isfinite(msg.points).all(axis=1)
         points_lidar = np.asarray(msg.points, dtype=np.float64)[finite]
         try:
@@ -189,9 +188,8 @@ class LidarScans:
                 )  # fmt: skip
             except TransformLookupError as exc:
                 return self._skip("lidar_no_odometry", f"sweep at {stamp} ns: {exc}")
-        if not self.filter.initialized:
-            self.skipped["lidar_no_estimate"] += 1
-            return None
+        if not self.filter.initialized:  # a lidar fix cannot start the estimate (tags do)
+            return self._skip("lidar_no_estimate", f"sweep at {stamp} ns before the estimate")
         try:
             T_map_base_prior = self.filter.T_map_base_at(stamp)
         except TransformLookupError as exc:
