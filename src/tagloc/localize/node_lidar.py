@@ -172,7 +172,7 @@ class LidarScans:
         if self._last_odom is not None and self._last_odom - stamp > cfg.max_scan_age_s * S_NS:
             return self._skip("lidar_stale", f"sweep at {stamp} ns processed too late")
         if cfg.ignore_in_cab and self._in_cab:
-            return self._skip("in_cab", f"sweep at {stamp} ns: the robot is in the cab")
+            return self._expected_skip("in_cab", f"sweep at {stamp} ns: the robot is in the cab")
         finite = np.isfinite(msg.points).all(axis=1)
         points_lidar = np.asarray(msg.points, dtype=np.float64)[finite]
         try:
@@ -189,7 +189,7 @@ class LidarScans:
             except TransformLookupError as exc:
                 return self._skip("lidar_no_odometry", f"sweep at {stamp} ns: {exc}")
         if not self.filter.initialized:  # a lidar fix cannot start the estimate (tags do)
-            return self._skip("lidar_no_estimate", f"sweep at {stamp} ns before the estimate")
+            return self._expected_skip("lidar_no_estimate", f"sweep at {stamp} ns, no estimate")
         try:
             T_map_base_prior = self.filter.T_map_base_at(stamp)
         except TransformLookupError as exc:
@@ -226,6 +226,13 @@ class LidarScans:
             return T_lidar_base @ T_odom_base0.inverse() @ T_odom_base @ T_base_lidar
 
         return motion
+
+    def _expected_skip(self, reason: str, detail: str) -> None:
+        """Count a sweep not used for an expected reason (no estimate yet, in the cab); the
+        first of each reason is logged at INFO (not a warning: nothing is wrong)."""
+        self.skipped[reason] += 1
+        if self.skipped[reason] == 1:
+            logger.info("lidar sweep skipped (%s): %s; further ones are counted", reason, detail)
 
     def _lidar_judged(self, event: FilterEvent, k: int) -> None:
         """The supervisor's quality books (NIS per measured direction); an accepted fix that
