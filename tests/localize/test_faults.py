@@ -72,7 +72,7 @@ def fault_run(name: str, *, clean: bool = False) -> FaultRun:
     if clean:
         scenario = replace(scenario, faults=())
     source, rec = ScenarioSource(scenario), RunRecorder()
-    run = localize_scenario(scenario, source=source, sinks=[rec])
+    run = localize_scenario(scenario, source=source, sinks=[rec], lidar=False)  # tags alone
     return FaultRun(run, rec, list(source), int(scenario.drive.stamps_ns[0]))
 
 

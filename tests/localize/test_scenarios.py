@@ -114,7 +114,7 @@ def test_correction_never_jumps_more_than_the_cap(
 
 
 def test_glints_never_give_an_accepted_fix() -> None:
-    run = run_scenario("glint", seed=0, duration_s=60.0)
+    run = run_scenario("glint", seed=0, duration_s=60.0, lidar=False)
     assert int(run.metadata["glints_injected"]) >= 1000  # type: ignore[call-overload]
     false = [a for a in run.fixes if a.false_detection]
     true = [a for a in run.fixes if a.false_detection is False]
@@ -130,7 +130,7 @@ def test_glints_never_give_an_accepted_fix() -> None:
 
 
 def test_a_moved_tag_is_rejected_and_reported() -> None:
-    run = run_scenario("moved_tag", seed=0, duration_s=60.0)
+    run = run_scenario("moved_tag", seed=0, duration_s=60.0, lidar=False)
     moved = [a for a in run.fixes if a.source == "tag:5" and not a.decision.startswith("rejected:")]
     assert len(moved) > 20
     assert not any(a.accepted for a in moved)
@@ -155,7 +155,7 @@ def relocalization_delay_s(run: LocalizationRun, tol_m: float = 0.1) -> float:
 
 
 def test_kidnap_relocalizes_within_a_second_of_the_first_sighting() -> None:
-    run = run_scenario("kidnap", seed=0, duration_s=50.0)
+    run = run_scenario("kidnap", seed=0, duration_s=50.0, lidar=False)
     (kidnap,) = run.kidnaps_ns
     errors = position_errors(run)
     i = int(np.searchsorted(run.stamps_ns, kidnap))
@@ -165,7 +165,7 @@ def test_kidnap_relocalizes_within_a_second_of_the_first_sighting() -> None:
 
 
 def test_kidnap_with_one_tag_in_view_relocalizes_from_it() -> None:
-    run = run_scenario("kidnap_one_tag", seed=0, duration_s=50.0)
+    run = run_scenario("kidnap_one_tag", seed=0, duration_s=50.0, lidar=False)
     (kidnap,) = run.kidnaps_ns
     reinit = [e for e in run.events if e.kind == "reinitialized_kidnap" and e.stamp_ns >= kidnap]
     assert len(reinit) == 1 and reinit[0].source == "tag:17"
@@ -174,7 +174,7 @@ def test_kidnap_with_one_tag_in_view_relocalizes_from_it() -> None:
 
 
 def test_camera_dropout_and_corridor_recover() -> None:
-    run = run_scenario("dropout", seed=1, duration_s=70.0)
+    run = run_scenario("dropout", seed=1, duration_s=70.0, lidar=False)
     lo, hi = (round(t * S) for t in SCENARIOS["dropout"].dropout_s or (0, 0))
     assert not [f for f in run.frames if lo < f.stamp_ns < hi]
     errors = position_errors(run)
@@ -195,7 +195,7 @@ FULL_ATE_M = {"default": 0.05, "glint": 0.05, "moved_tag": 0.05, "dropout": 0.06
 def test_full_length_scenarios(name: str) -> None:
     from tagloc.eval import evaluate
 
-    run = run_scenario(name, seed=0)
+    run = run_scenario(name, seed=0, lidar=False)
     summary = evaluate(run).summary
     fused, odom = summary.estimators["fused"], summary.estimators["odometry"]
     assert odom.ate_rmse_m > 1.0  # the legged odometry drifts several %

@@ -95,7 +95,7 @@ def test_a_robot_without_lidar_streams_none() -> None:
 def test_the_localizer_ignores_the_lidar() -> None:
     world = load_default_world()
     bare = world.model_copy(update={"robot": world.robot.model_copy(update={"lidar": None})})
-    with_lidar = localize_scenario(build_scenario("default", 0, 12.0))
+    with_lidar = localize_scenario(build_scenario("default", 0, 12.0), lidar=False)
     without = localize_scenario(build_scenario("default", 0, 12.0, world=bare))
     np.testing.assert_array_equal(with_lidar.stamps_ns, without.stamps_ns)
     np.testing.assert_array_equal(with_lidar.T_map_base.as_matrix(), without.T_map_base.as_matrix())

@@ -174,12 +174,12 @@ def run_demo(
     # 2. localize the drive against the built map (and the true map for reference)
     source = ScenarioSource(scenario)  # the drive's detections, shared by both runs
     with console.status("localizing against the true tag map"):
-        run_true = localize_scenario(scenario, source=source)
+        run_true = localize_scenario(scenario, source=source, lidar=False)  # the tag maps
     run_built = None
     if survey is not None:
         with console.status("localizing against the built tag map"):
             built = replace(scenario, tag_map=survey.tag_map)
-            run_built = localize_scenario(built, source=source)
+            run_built = localize_scenario(built, source=source, lidar=False)
     # 3. evaluation reports, the picture, the table
     summaries = {"true map": write_report(run_true, out / "localize_true_map")}
     files += [out / "localize_true_map" / "report.html"]

@@ -49,6 +49,14 @@ def eval_run(
         float, typer.Option(help="Y: rotation tolerance, deg.", callback=in_range(gt=0, le=180))
     ] = 2.0,
     strict: Annotated[bool, typer.Option("--strict", help="Exit 2 if a check fails.")] = False,
+    lidar: Annotated[
+        bool | None,
+        typer.Option(
+            "--lidar/--no-lidar",
+            help="Use the lidar and the truth premap (default: when the world has a lidar).",
+            show_default=False,
+        ),
+    ] = None,
 ) -> None:
     """Localize a simulated scenario and write its evaluation report to OUT."""
     from tagloc.eval import EvalConfig, write_report
@@ -62,7 +70,7 @@ def eval_run(
         position_tol_m=position_cm / 100.0,
         rotation_tol_deg=rotation_deg,
     )
-    run = run_scenario(scenario, seed=seed, duration_s=duration)
+    run = run_scenario(scenario, seed=seed, duration_s=duration, lidar=lidar)
     summary = write_report(run, out, config=config)
     print_summary(summary)
     typer.echo(f"wrote report.html, summary.json and TUM files to {out}")

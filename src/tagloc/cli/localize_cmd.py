@@ -22,6 +22,8 @@ from tagloc.cli.options import duration_range, in_range, seed_range
 from tagloc.fileutil import check_outputs
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from tagloc.cli.bag_camera import BagCamera
     from tagloc.localize.config import LocalizerConfig
     from tagloc.localize.node import LocalizerNode
@@ -77,6 +79,11 @@ def localize(
         float | None, typer.Option(help="Scenario: first N s only.", callback=duration_range)
     ] = None,
     tf_topic: Annotated[str, typer.Option(help="Odometry as /tf (odom -> base).")] = "/tf",
+    lidar_topic: Annotated[str, typer.Option(help="Lidar sweeps (PointCloud2).")] = "/lidar/points",
+    premap: Annotated[
+        Path | None,
+        typer.Option(help="Point cloud map (.ply/.pcd, map frame) for the lidar fixes."),
+    ] = None,
     no_bag: Annotated[bool, typer.Option("--no-bag", help="No localization.mcap.")] = False,
     realtime: Annotated[
         bool, typer.Option("--realtime", help="Pace by the wall clock; detect on a worker.")
@@ -97,16 +104,19 @@ def localize(
     cam = BagCamera(cameras, camera_poses, tagslam, corner_order)
     check_outputs(
         {"--out": out}, directories={"--out": OUTPUT_FILES},
-        inputs={"BAG": bag, "--tags": tags, "--config": config, **cam.inputs()},
+        inputs={"BAG": bag, "--tags": tags, "--config": config, "--premap": premap,
+                **cam.inputs()},
     )  # fmt: skip
     cfg = None if config is None else load_localizer_config(config)
+    points = None if premap is None else _read_premap(premap)
 
-    topics = (odom_topic, detections_topic, image_topic, camera_info_topic, truth_topic, tf_topic)
+    topics = (odom_topic, detections_topic, image_topic, camera_info_topic, truth_topic, tf_topic,
+              lidar_topic)  # fmt: skip
     if scenario is not None:
-        wired = _scenario_node(scenario, seed, duration, cfg)
+        wired = _scenario_node(scenario, seed, duration, cfg, points)
     else:
         assert bag is not None
-        wired = _bag_node(bag, tags, cfg, cam, topics)
+        wired = _bag_node(bag, tags, cfg, cam, topics, points)
     if realtime:  # live order: publish each odometry sample before the frames it completes
         node_cfg = wired.node.config
         output = node_cfg.output.model_copy(update={"publish_first": True})
@@ -183,27 +193,44 @@ def _check_frames(node: LocalizerNode, n_frames: int) -> None:
     logger.warning("no camera frame reached the node: check the detections/image topic")
 
 
+def _read_premap(path: Path) -> np.ndarray:
+    """The premap's ``(N, 3)`` points from a PLY or PCD file (one-line errors from io)."""
+    from tagloc.io.pointcloud_files import read_pcd, read_ply
+    from tagloc.localize import LocalizeError
+
+    suffix = path.suffix.lower()
+    if suffix not in (".ply", ".pcd"):
+        raise LocalizeError(f"--premap {path}: expected a .ply or .pcd file")
+    return read_ply(path) if suffix == ".ply" else read_pcd(path)
+
+
 def _scenario_node(
-    name: str, seed: int, duration: float | None, cfg: LocalizerConfig | None
-) -> WiredNode:
+    name: str, seed: int, duration: float | None, cfg: LocalizerConfig | None,
+    premap: np.ndarray | None = None,
+) -> WiredNode:  # fmt: skip
+    """The scenario's node; with the lidar (the world's robot has one, ``lidar.enabled``) the
+    premap is ``premap`` or else the scenario's truth premap."""
     from tagloc.localize.node import LocalizerNode
     from tagloc.sim.scenarios import (
         ScenarioSource,
         build_scenario,
         calibrated_config,
         scenario_config,
+        scenario_premap,
     )
 
     scenario = build_scenario(name, seed=seed, duration_s=duration)
     source = ScenarioSource(scenario)
     config = calibrated_config(scenario, cfg if cfg is not None else scenario_config())
-    node = LocalizerNode(scenario.tag_map, config, frame_truth=source.frame_truth)
+    if premap is None and config.lidar.enabled and scenario.world.robot.lidar is not None:
+        premap = scenario_premap(scenario)
+    node = LocalizerNode(scenario.tag_map, config, frame_truth=source.frame_truth, premap=premap)
     return WiredNode(node, source, f"scenario:{name}")
 
 
 def _bag_node(
     bag: Path, tags: Path | None, cfg: LocalizerConfig | None, cam: BagCamera,
-    topics: tuple[str, ...],
+    topics: tuple[str, ...], premap: np.ndarray | None = None,
 ) -> WiredNode:  # fmt: skip
     from tagloc.cli.bag_camera import bag_camera, check_bag_camera
     from tagloc.io import BagSource
@@ -237,5 +264,6 @@ def _bag_node(
     wanted += [t for t in source.bag_topics if t.rstrip("/").endswith("tf_static")]
     source = BagSource(bag, sorted(set(wanted)), corner_order=cam.corner_order,
                        default_family=family)  # fmt: skip
-    node = LocalizerNode(tag_map, cfg, camera=camera, T_base_cam=T_base_cam, topics=roles)
+    node = LocalizerNode(tag_map, cfg, camera=camera, T_base_cam=T_base_cam, topics=roles,
+                         premap=premap)  # fmt: skip
     return WiredNode(node, source, bag.name, checked)

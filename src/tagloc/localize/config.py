@@ -3,7 +3,8 @@
 Sections: ``frames`` (names, the published edge), ``tags`` (detector, PnP mode, pixel noise, how
 fixes are formed), ``gates`` (one set for observations and fixes), ``process_noise``,
 ``calibration``, ``cap`` (per-update cap and speed limit), ``kidnap``, ``suspect``, ``filter``,
-``supervisor`` (health, ladder, status rate) and ``output`` (publication rate). The resolved
+``supervisor`` (health, ladder, status rate), ``output`` (publication rate) and ``lidar`` (the
+scan-to-premap fix source, :mod:`tagloc.localize.config_lidar`). The resolved
 configuration (every default written out) is saved with every run.
 
 Loaded like every tagloc file (:mod:`tagloc.config`): unknown keys, NaN and wrong types are one
@@ -26,6 +27,7 @@ from pydantic import Field
 
 from tagloc.config import StrictModel, parse_yaml_mapping, read_text_file, validate
 from tagloc.fileutil import atomic_write_text
+from tagloc.localize.config_lidar import LidarConfig
 from tagloc.localize.config_tags import FramesConfig, GatesConfig, TagSensorConfig
 from tagloc.supervise import SupervisorConfig
 
@@ -178,6 +180,7 @@ class LocalizerConfig(StrictModel):
     tags: TagSensorConfig = TagSensorConfig()
     supervisor: SupervisorConfig = SupervisorConfig()
     output: OutputConfig = OutputConfig()
+    lidar: LidarConfig = LidarConfig()
 
     @classmethod
     def from_yaml_text(cls, text: str, source: str = "<string>") -> LocalizerConfig:

@@ -12,6 +12,8 @@ Per-fix decisions (each fix gets exactly one on arrival; a fix buffered as
 - ``PENDING_CONSISTENCY``: buffered until ``k`` mutually consistent fixes arrive (start-up,
   after a gap).
 - ``DISCARDED_CANDIDATE``: a pending fix that left the window without joining a consistent set.
+- ``UNUSED_NO_STATE``: a partial fix (one that measures only some directions, e.g. lidar)
+  before the state exists: it cannot start the filter.
 
 Filter-level decisions (one event each): ``INITIALIZED`` (state created from ``k`` consistent
 fixes, or an explicit prior), ``REINITIALIZED_KIDNAP``, ``GAP`` (no accepted fix for too long:
@@ -41,6 +43,7 @@ class EventKind(StrEnum):
     NO_ODOMETRY = "no_odometry"
     PENDING_CONSISTENCY = "pending_consistency"
     DISCARDED_CANDIDATE = "discarded_candidate"
+    UNUSED_NO_STATE = "unused_no_state"
     INITIALIZED = "initialized"
     REINITIALIZED_KIDNAP = "reinitialized_kidnap"
     GAP = "gap"

@@ -44,7 +44,8 @@ Late fixes
     ``R <- R + H_x Q_x H_x^T`` (conservative).
 
 Policies (start-up, gaps, kidnap, moved tags, the cap) are in :meth:`MapOdomFilter.update`
-and :mod:`tagloc.localize.gating`.
+and :mod:`tagloc.localize.gating`. A fix that measures only some directions (a lidar scan match)
+enters through :meth:`MapOdomFilter.update_partial` (:mod:`tagloc.localize.projected_update`).
 """
 
 from __future__ import annotations
@@ -69,6 +70,7 @@ from tagloc.localize.fix import (
     CorrectionUpdate,
     FloatArray,
     LocalizeError,
+    PartialFix,
     PoseWithCovariance,
     TagFix,
     check_covariance,
@@ -90,6 +92,7 @@ from tagloc.localize.motion import (
     PathMotion,
     ProcessNoise,
 )
+from tagloc.localize.projected_update import planar_constraint, project_step, projector
 from tagloc.localize.publisher import CorrectionPublisher
 
 logger = logging.getLogger(__name__)
@@ -186,6 +189,7 @@ class MapOdomFilter:
         self._n = self.dof + self._nc  # error-state size: pose tangent, then calibration
         self._noise, self._quality, self._cap = noise, quality, cap
         self.threshold = chi2_threshold(chi2_quantile, self.dof)
+        self._quantile = chi2_quantile
         self._gap_ns, self._gap_m = gap_ns, gap_m
         self._kidnap_on = kidnap_n > 0
         self._max_iter, self._tol = max_iterations, relinearize_tol
@@ -496,6 +500,52 @@ class MapOdomFilter:
             return self._buffer_candidate(cand, initial=False)
         return self._decide(cand)
 
+    def update_partial(self, fix: PartialFix) -> FilterEvent:
+        """Decide on a fix that measures only the directions ``fix.basis`` and apply it if it
+        passes (:mod:`tagloc.localize.projected_update`): the chi-square gate on ``k`` dof,
+        then the iterated update that never moves the estimate along an unmeasured direction.
+
+        Such a fix cannot start the state (``UNUSED_NO_STATE`` before it exists), does not
+        wait for consistent fixes after a gap and feeds neither the kidnap nor the suspect
+        books (those are the tag fixes'). One that measures every direction of the filter
+        (``k = dof`` after the planar projection) and is accepted counts as a fix for the gap
+        rule (it ends a gap: fixes held for re-acquisition are discarded).
+        """
+        try:
+            A3 = self._lookup(fix.stamp_ns)
+        except TransformLookupError as exc:
+            return self._event(fix.stamp_ns, EventKind.NO_ODOMETRY, fix.source, detail=str(exc))
+        if self._X is None:
+            return self._event(fix.stamp_ns, EventKind.UNUSED_NO_STATE, fix.source)
+        if fix.stamp_ns > self._stamp:
+            self._advance(fix.stamp_ns, A3)
+        if self.planar:
+            basis, R = planar_constraint(fix.basis, fix.cov)
+            cand = Candidate(fix, A3, A3.to_se2(), fix.T_map_base.to_se2(), R, basis)
+        else:
+            cand = Candidate(fix, A3, A3, fix.T_map_base, fix.cov, fix.basis)
+        k = cand.R.shape[0]
+        if k == 0:
+            return self._event(fix.stamp_ns, EventKind.GATED_QUALITY, fix.source,
+                               detail="no measured direction in the plane")  # fmt: skip
+        innov = self._innovation(cand, self._back(cand))
+        threshold = chi2_threshold(self._quantile, k)
+        if innov.d2 > threshold:
+            return self._event(fix.stamp_ns, EventKind.GATED_CHI2, fix.source, innov.d2, threshold)
+        self._X, self._c, self._P = self._iekf(cand, innov)
+        self.revision += 1
+        self._updated_ns = max(self._updated_ns, fix.stamp_ns)
+        if k == self.dof:
+            if self._gap:
+                self._gap = False
+                for old in self._candidates.clear():
+                    self._event(old.stamp_ns, EventKind.DISCARDED_CANDIDATE, old.fix.source)
+            self._ref_stamp = max(self._ref_stamp, fix.stamp_ns)
+            self._ref_odometer = self._odometer_m
+        event = self._event(fix.stamp_ns, EventKind.ACCEPTED, fix.source, innov.d2, threshold)
+        self._publish(fix.stamp_ns, snap=False)
+        return event
+
     # ----- policies --------------------------------------------------------------------------
     def _decide(self, cand: Candidate) -> FilterEvent:
         """Chi-square gate against the state, then the update (or the kidnap / suspect books)."""
@@ -604,8 +654,8 @@ class MapOdomFilter:
         self._set_batch([(m.fix, self._decide(m).kind) for m in found])
         return event
 
-    def _set_batch(self, batch: list[tuple[TagFix, EventKind]]) -> None:
-        self._batch = tuple(batch)
+    def _set_batch(self, batch: list[tuple[TagFix | PartialFix, EventKind]]) -> None:
+        self._batch = tuple((f, k) for f, k in batch if isinstance(f, TagFix))  # tag fixes only
         self.batch_serial += 1
 
     def _gated_now(self, cand: Candidate) -> bool:
@@ -798,6 +848,8 @@ class MapOdomFilter:
         M = back.M if back is not None and self._nc else None
         nu, H = self._linearize(cand, X, self._c, M)
         P_fix, R = P, cand.R
+        if cand.basis is not None:  # a partial fix: only its measured directions
+            nu, H = cand.basis.T @ nu, cand.basis.T @ H
         if back is not None:
             Q_back = self._full_noise(back)
             Hx = H[:, : self.dof]
@@ -834,9 +886,7 @@ class MapOdomFilter:
             return nu, H
         return nu, np.hstack([H_f @ E.inverse().adjoint(), H_f @ Jr_u @ M])
 
-    def _iekf(
-        self, cand: Candidate, innov: _Innovation
-    ) -> tuple[Pose, FloatArray, FloatArray]:
+    def _iekf(self, cand: Candidate, innov: _Innovation) -> tuple[Pose, FloatArray, FloatArray]:
         """Iterated error-state update (module docstring) of the pose and the calibration;
         returns the new ``X``, ``c`` and ``P``. Relinearizes while the step seen at the base,
         ``|H dx|``, exceeds the tolerance."""
@@ -845,6 +895,7 @@ class MapOdomFilter:
         X, c, Pi, m = X0, c0, P0, None
         nu, H, S_inv = innov.nu, innov.H, innov.S_inv
         J = np.eye(n)
+        Pr = None if cand.basis is None else projector(cand.Ad_A_inv, cand.basis)
         for i in range(self._max_iter):
             if i:  # relinearize at X: prior mean and covariance moved into X's tangent
                 e = X.minus(X0)  # type: ignore[arg-type]
@@ -852,13 +903,20 @@ class MapOdomFilter:
                 m = -np.concatenate([J[:dof, :dof] @ e, c - c0])
                 Pi = J @ P0 @ J.T
                 nu, H = self._linearize(cand, X, c, M)
+                if cand.basis is not None:
+                    nu, H = cand.basis.T @ nu, cand.basis.T @ H
                 S_inv = np.linalg.inv(H @ Pi @ H.T + R).astype(np.float64, copy=False)
             K = Pi @ H.T @ S_inv
+            if Pr is not None:  # Schmidt gain: no step along unmeasured directions
+                K[:dof] = Pr @ K[:dof]
             dx = K @ nu if m is None else m + K @ (nu - H @ m)
-            X_new, c_new = X.plus(dx[:dof]), c + dx[dof:]
+            X_from, X_new, c_new = X, X.plus(dx[:dof]), c + dx[dof:]
             if float(np.abs(H @ dx).max()) <= self._tol:
                 break
             X, c = X_new, c_new
+        if Pr is not None:  # the total step, exactly within the measured directions
+            X_new = project_step(X0, X_new, Pr)
+            dx[:dof] = X_new.minus(X_from)  # type: ignore[arg-type]
         IKH = np.eye(n) - K @ H
         Jd = np.eye(n)
         Jd[:dof, :dof] = _jr(dx[:dof])

@@ -132,6 +132,65 @@ class TagFix:
         return self.T_map_base.to_se2(), J @ self.cov @ J.T
 
 
+@dataclass(frozen=True, slots=True, eq=False)
+class PartialFix:
+    """An absolute fix that measures ``T_map_base`` only along some directions (a lidar scan
+    match in a corridor knows y and yaw, not x): the filter's projected update
+    (:mod:`tagloc.localize.projected_update`).
+
+    Attributes
+    ----------
+    stamp_ns : int
+    T_map_base : SE3
+    basis : (6, k) float, read-only
+        Orthonormal columns spanning the measured directions of the right tangent of
+        ``T_map_base``, ``[x, y, z, rx, ry, rz]``; ``1 <= k <= 6``.
+    cov : (k, k) float, read-only
+        Covariance of ``basis.T @ Log(T_true^-1 T_map_base)``.
+    source : str
+        E.g. ``"lidar"``.
+    quality : FixQuality
+        Unused by the filter's quality limits (a partial fix comes with its own checks).
+
+    Raises
+    ------
+    LocalizeError
+        On a bad stamp, pose or source, a basis that is not ``(6, k)`` orthonormal, or a
+        covariance that is not ``(k, k)`` symmetric positive definite.
+    """
+
+    stamp_ns: int
+    T_map_base: SE3
+    basis: FloatArray
+    cov: FloatArray
+    source: str
+    quality: FixQuality = FixQuality(float("nan"), 0)
+
+    def __post_init__(self) -> None:
+        name = f"PartialFix from {self.source!r} at {self.stamp_ns} ns"
+        if isinstance(self.stamp_ns, bool) or not isinstance(self.stamp_ns, int | np.integer):
+            raise LocalizeError(f"{name}: stamp_ns must be an integer (ns)")
+        object.__setattr__(self, "stamp_ns", int(self.stamp_ns))
+        if not isinstance(self.T_map_base, SE3) or self.T_map_base.is_batch:
+            raise LocalizeError(f"{name}: T_map_base must be one SE3")
+        if not isinstance(self.source, str) or not self.source:
+            raise LocalizeError("PartialFix: source must be a non-empty string such as 'lidar'")
+        basis = np.array(self.basis, dtype=np.float64)
+        k = basis.shape[1] if basis.ndim == 2 else -1
+        if basis.ndim != 2 or basis.shape[0] != 6 or not 1 <= k <= 6:
+            raise LocalizeError(f"{name}: basis must be (6, k), 1 <= k <= 6, got {basis.shape}")
+        if not np.isfinite(basis).all() or not np.allclose(basis.T @ basis, np.eye(k), atol=1e-9):
+            raise LocalizeError(f"{name}: basis columns must be orthonormal")
+        basis.flags.writeable = False
+        object.__setattr__(self, "basis", basis)
+        object.__setattr__(self, "cov", check_covariance(self.cov, k, f"{name}: cov"))
+
+    @property
+    def k(self) -> int:
+        """Number of measured directions."""
+        return int(self.basis.shape[1])
+
+
 def planar_projection_jacobian(T: SE3) -> FloatArray:
     """``J (3, 6)``: right perturbation ``[x, y, z, rx, ry, rz]`` of ``T`` to the right perturbation
     ``[x, y, theta]`` of ``T.to_se2()`` (yaw ``psi = atan2(R10, R00)``).

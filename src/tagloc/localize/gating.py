@@ -25,7 +25,7 @@ from scipy.stats import chi2
 
 from tagloc.geometry import SE2, SE3, SO3
 from tagloc.localize.events import EventKind
-from tagloc.localize.fix import FixQuality, FloatArray, TagFix
+from tagloc.localize.fix import FixQuality, FloatArray, PartialFix, TagFix
 
 Pose = SE3 | SE2
 
@@ -87,14 +87,18 @@ class Candidate:
     A : SE3 or SE2
         The same as the filter uses it (its planar projection in planar mode).
     z, R : SE3 or SE2, (d, d) float
-        The measurement and its covariance as the filter uses them (projected in planar mode).
+        The measurement and its covariance as the filter uses them (projected in planar mode);
+        for a partial fix ``R`` is ``(k, k)``, the covariance along ``basis``.
+    basis : (d, k) float, optional
+        A partial fix's measured directions in the filter's tangent (None: all of them).
     """
 
-    fix: TagFix
+    fix: TagFix | PartialFix
     odom: SE3
     A: Pose
     z: Pose
     R: FloatArray
+    basis: FloatArray | None = None
 
     @property
     def stamp_ns(self) -> int:

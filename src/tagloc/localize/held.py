@@ -61,7 +61,7 @@ class HeldRecords:
             record = self._held.popleft()
             self._serial0 += 1
             if isinstance(record, FixAttempt):
-                if record.accepted:
+                if record.accepted and record.tag_ids:  # a lidar fix is no camera frame's
                     self._accepted_at[record.stamp_ns] += 1
             else:
                 n = self._accepted_at.pop(record.stamp_ns, 0)

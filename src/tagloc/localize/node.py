@@ -15,6 +15,9 @@ topics are named by :class:`NodeTopics`:
 - camera frames: ``TagDetectionsMsg`` (``detections``) or ``ImageMsg`` (``image``, run through
   the configured detector): held until the odometry covers their stamp, then turned into fixes
   (:class:`~tagloc.localize.fiducial.FiducialFixSource`) applied at their own stamp.
+- lidar sweeps: ``PointCloudMsg`` (``lidar``), when the node has a premap and ``lidar.enabled``:
+  held until the odometry covers the sweep, then registered against the premap into a fix that
+  measures the directions the scan constrains (:class:`~tagloc.localize.node_lidar.LidarScans`).
 - ``CameraInfoMsg`` (``camera_info``) and static ``TransformMsg`` (``base -> camera``) when the
   camera model or extrinsics are not given; ``GroundTruthMsg`` (``truth``) is passed through.
 
@@ -30,7 +33,7 @@ import dataclasses
 import heapq
 import logging
 import math
-from collections import Counter, OrderedDict
+from collections import Counter, OrderedDict, deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -40,6 +43,7 @@ import numpy as np
 from tagloc.camera import CameraModel, from_camera_info
 from tagloc.frames import TransformBuffer
 from tagloc.geometry import SE3
+from tagloc.lidar.registration import Target
 from tagloc.localize.config import LocalizerConfig
 from tagloc.localize.fiducial import FiducialFixSource
 from tagloc.localize.filter import MapOdomFilter
@@ -47,6 +51,7 @@ from tagloc.localize.fix import LocalizeError
 from tagloc.localize.held import HeldRecords
 from tagloc.localize.motion import CALIBRATION_PARAMETERS
 from tagloc.localize.node_frames import MARKERS, CameraFrames, _Frame
+from tagloc.localize.node_lidar import LIDAR, LidarScans, check_premap_overlap
 from tagloc.localize.outputs import Estimate, NodeOutput, OutputSink
 from tagloc.messages import (
     CameraInfoMsg,
@@ -54,6 +59,7 @@ from tagloc.messages import (
     ImageMsg,
     Message,
     OdometryMsg,
+    PointCloudMsg,
     TagDetectionsMsg,
     TransformMsg,
 )
@@ -97,7 +103,7 @@ class FrameTruth:
     nearest_visible_m: float
 
 
-class LocalizerNode(CameraFrames):
+class LocalizerNode(CameraFrames, LidarScans):
     """The node (module docstring). Call :meth:`feed` per message, :meth:`finish` at the end.
 
     Parameters
@@ -115,6 +121,15 @@ class LocalizerNode(CameraFrames):
         For ``ImageMsg`` frames (default: the configured backend and family, on first use).
     frame_truth : Mapping[int, FrameTruth], optional
         Simulator truth by frame stamp (fills ``false_detection`` / ``nearest_visible_tag_m``).
+    premap : (N, 3) float, optional
+        The point cloud map (in the map frame, m) the lidar sweeps are registered against;
+        prepared once here. None (or ``lidar.enabled: false``): the lidar topic is ignored.
+
+    Raises
+    ------
+    LocalizeError
+        If the premap is not a finite ``(N, 3)`` array of at least 10 points, or misses every
+        tag of the map frame (:func:`~tagloc.localize.node_lidar.check_premap_overlap`).
     """
 
     def __init__(
@@ -122,6 +137,7 @@ class LocalizerNode(CameraFrames):
         sinks: Sequence[OutputSink] = (), *, camera: CameraModel | None = None,
         T_base_cam: SE3 | None = None, topics: NodeTopics | None = None,
         detector: TagDetector | None = None, frame_truth: Mapping[int, FrameTruth] | None = None,
+        premap: np.ndarray | None = None,
     ) -> None:  # fmt: skip
         self.config = cfg = config or LocalizerConfig()
         self.topics = topics or NodeTopics()
@@ -130,11 +146,16 @@ class LocalizerNode(CameraFrames):
         self.buffer = TransformBuffer(window_ns=30 * S_NS)
         self.filter = MapOdomFilter.from_config(cfg, self.buffer)
         self.filter.events.listeners.append(self._emit)
-        self.supervisor = Supervisor(
-            cfg.supervisor, [FixSourceSpec(MARKERS, "markers", "camera")], cfg.gates.gap_s,
-            cfg.gates.gap_m,
-        )  # fmt: skip
         self._tag_map = tag_map
+        self._premap = self._prepare_premap(premap) if cfg.lidar.enabled else None
+        sources = [FixSourceSpec(MARKERS, "markers", "camera")]
+        if self._premap is not None:
+            sources.append(FixSourceSpec(LIDAR, "lidar", LIDAR))
+        self.supervisor = Supervisor(cfg.supervisor, sources, cfg.gates.gap_s, cfg.gates.gap_m)
+        self._scans: deque[PointCloudMsg] = deque()
+        self._next_scan_ns = -(2**62)
+        self._in_cab = False
+        self.lidar_counts: Counter[str] = Counter()
         self._camera, self._T_base_cam, self._detector = camera, T_base_cam, detector
         self._source: FiducialFixSource | None = None
         self._truth_info = frame_truth or {}
@@ -200,8 +221,23 @@ class LocalizerNode(CameraFrames):
         elif isinstance(msg, TransformMsg) and msg.static:
             self.buffer.set_static(msg.parent, msg.child, msg.T_parent_child)
             self._statics[msg.parent, msg.child] = msg.T_parent_child
+        elif isinstance(msg, PointCloudMsg) and topic == t.lidar:
+            if self._premap is not None:
+                self._on_cloud(msg)
         elif isinstance(msg, GroundTruthMsg) and topic == t.truth:
             self._emit(msg)
+
+    def _prepare_premap(self, premap: np.ndarray | None) -> Target | None:
+        """The premap as a registration target (None without one)."""
+        if premap is None:
+            return None
+        points = np.asarray(premap, dtype=np.float64)
+        if points.ndim != 2 or points.shape[1] != 3 or len(points) < 10:
+            raise LocalizeError(f"premap must be (N >= 10, 3) points, got {points.shape}")
+        if not np.isfinite(points).all():
+            raise LocalizeError("premap holds NaN or inf points")
+        check_premap_overlap(points, self._tag_map, self.frames_cfg.map_frame)
+        return Target.from_points(points, self.config.lidar.fix.registration)
 
     def finish(self) -> None:
         """Process frames still waiting for odometry and hand on every held record.
@@ -213,6 +249,7 @@ class LocalizerNode(CameraFrames):
         """
         while self._pending:
             self._process(heapq.heappop(self._pending)[2])
+        self._lidar_due(None)
         self._held.release(None)
         if self._last_odom is None:
             raise LocalizeError(
@@ -247,6 +284,8 @@ class LocalizerNode(CameraFrames):
             self._estimate(stamp, T)
         while self._pending and self._pending[0][0] <= stamp:
             self._process(heapq.heappop(self._pending)[2])
+        if self._scans:
+            self._lidar_due(stamp)
         if not self.config.output.publish_first:
             self.filter.predict(stamp)
             self._estimate(stamp, T)
@@ -321,7 +360,11 @@ class LocalizerNode(CameraFrames):
         logger.warning("clock jumped back %.3f s (odometry at %d ns): starting over", back_s, stamp)
         self.clock_jumps += 1
         self.skipped["frame_before_clock_jump"] += len(self._pending)
+        if self._scans:
+            self.skipped["lidar_before_clock_jump"] += len(self._scans)
         self._pending.clear()
+        self._scans.clear()
+        self._next_scan_ns = -(2**62)
         self._recent_frames.clear()
         self._held.release(None)
         self.buffer = TransformBuffer(window_ns=30 * S_NS)
@@ -354,7 +397,7 @@ class LocalizerNode(CameraFrames):
                 for name, v, s in zip(CALIBRATION_PARAMETERS, value, sigma, strict=True)
             }
         ladder = self.supervisor.ladder
-        return {
+        out: dict[str, Any] = {
             "odometry_calibration": calib, "skipped": dict(self.skipped), "event_counts": counts,
             "suspect_sources": list(flt.suspect_sources), "clock_jumps": self.clock_jumps,
             "config": self.config.model_dump(mode="json"),
@@ -363,3 +406,6 @@ class LocalizerNode(CameraFrames):
             "ladder": {"seconds_at_level": ladder.seconds_at_levels(),
                        "transitions": ladder.transitions, "level": int(ladder.level)},
         }  # fmt: skip
+        if self._premap is not None:
+            out["lidar_source"] = {"sweeps_thinned": self.lidar_counts["thinned"]}
+        return out

@@ -60,7 +60,6 @@ class _Frame:
     fixes: FrameFixes | None = None  # computed elsewhere (the real-time worker)
 
 
-
 class CameraFrames:
     """Camera frames to fixes to filter decisions (module docstring). The node's state it
     uses is declared here; the node sets it."""
@@ -90,6 +89,10 @@ class CameraFrames:
 
     def _tick(self, stamp: int, reason: str = "") -> None:
         raise NotImplementedError  # the node's: steps the supervisor
+
+    if TYPE_CHECKING:
+
+        def _note_tags(self, detections: tuple[TagDetection, ...]) -> None: ...  # LidarScans'
 
     def _skip(self, reason: str, detail: str) -> None:
         """Count a skipped input; log the first of each reason."""
@@ -159,9 +162,7 @@ class CameraFrames:
             self._skip("detector_error", f"frame at {msg.stamp_ns} ns: {exc!r}")
             return None
 
-    def _fix_source(
-        self, frame: _Frame, *, quiet: bool = False
-    ) -> FiducialFixSource | None:
+    def _fix_source(self, frame: _Frame, *, quiet: bool = False) -> FiducialFixSource | None:
         if self._source is not None:
             return self._source
         if self._camera is None:
@@ -198,6 +199,7 @@ class CameraFrames:
         source = self._fix_source(frame)
         if source is None:
             return
+        self._note_tags(frame.detections)  # the lidar's cab rule
         truth = self._truth_info.get(frame.stamp_ns)
         flags = truth.false_detection if truth is not None else None
         if flags is not None and len(flags) != len(frame.detections):
@@ -254,7 +256,6 @@ class CameraFrames:
             self._fix_odometer_m = self._odometer_m
         nis = math.nan if event.d2 is None else event.d2 / self.filter.dof
         self.supervisor.on_fix(MARKERS, accepted, nis, reproj_px)
-
 
 
 def _nearest(result: FrameFixes) -> float:

@@ -11,6 +11,8 @@ import time
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
+import numpy as np
+
 from tagloc.camera import CameraModel
 from tagloc.geometry import SE3
 from tagloc.localize.config import LocalizerConfig
@@ -44,12 +46,12 @@ class LocalizationPipeline:
         camera: CameraModel | None = None, T_base_cam: SE3 | None = None,
         topics: NodeTopics | None = None, detector: TagDetector | None = None,
         frame_truth: Mapping[int, FrameTruth] | None = None, name: str = "run",
-        sinks: Sequence[OutputSink] = (),
+        sinks: Sequence[OutputSink] = (), premap: np.ndarray | None = None,
     ) -> None:  # fmt: skip
         self.recorder = RunRecorder(name)
         self.node = LocalizerNode(
             tag_map, config, [self.recorder, *sinks], camera=camera, T_base_cam=T_base_cam,
-            topics=topics, detector=detector, frame_truth=frame_truth,
+            topics=topics, detector=detector, frame_truth=frame_truth, premap=premap,
         )  # fmt: skip
         self.config, self.topics = self.node.config, self.node.topics
         self.name = name

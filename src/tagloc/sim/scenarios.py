@@ -477,6 +477,7 @@ def run_scenario(
     *,
     config: LocalizerConfig | None = None,
     sinks: Sequence[OutputSink] = (),
+    lidar: bool | None = None,
 ) -> LocalizationRun:
     """Simulate scenario ``name`` and localize it against the surveyed tag map.
 
@@ -492,6 +493,9 @@ def run_scenario(
         The node's configuration (default: :func:`scenario_config`).
     sinks : sequence of OutputSink
         More sinks for the node's outputs, as they happen (beside the run's recorder).
+    lidar : bool, optional
+        Use the lidar (the node gets the truth premap, :func:`scenario_premap`); default: when
+        the world's robot has one. ``False`` sets ``lidar.enabled: false`` (tags alone).
 
     Returns
     -------
@@ -499,7 +503,8 @@ def run_scenario(
         With ground truth, ``kidnaps_ns`` and ``metadata`` (scenario, seed, description,
         distance travelled, glints injected).
     """
-    return localize_scenario(build_scenario(name, seed, duration_s), config, sinks=sinks)
+    scenario = build_scenario(name, seed, duration_s)
+    return localize_scenario(scenario, config, sinks=sinks, lidar=lidar)
 
 
 def localize_scenario(
@@ -507,6 +512,7 @@ def localize_scenario(
     config: LocalizerConfig | None = None,
     source: ScenarioSource | None = None,
     sinks: Sequence[OutputSink] = (),
+    lidar: bool | None = None,
 ) -> LocalizationRun:
     """Localize a built scenario (see :func:`run_scenario`) through the message stream.
 
@@ -514,20 +520,35 @@ def localize_scenario(
     ``scenario.tag_map``, so runs of one drive against different maps can share it);
     ``sinks``: more sinks for the node's outputs as they happen. Unless the configuration sets
     ``tags.noise``, the tag sensor's ``sigma_px`` is the simulated detector's (as one calibrates
-    it on a real detector's corners).
+    it on a real detector's corners). ``lidar``: as :func:`run_scenario`'s.
+
+    Raises
+    ------
+    SimulationError
+        If ``lidar`` is True and the world's robot has no lidar.
     """
+    has_lidar = scenario.world.robot.lidar is not None
+    if lidar and not has_lidar:
+        raise SimulationError(f"scenario {scenario.name}: the world's robot has no lidar")
+    use_lidar = has_lidar if lidar is None else lidar
     if source is None:
         source = ScenarioSource(scenario)
     elif source.scenario.drive is not scenario.drive:
         raise ValueError("localize_scenario: the source was built from another drive")
     config = calibrated_config(scenario, config if config is not None else scenario_config())
+    if not use_lidar:
+        config = config.model_copy(
+            update={"lidar": config.lidar.model_copy(update={"enabled": False})}
+        )
     pipeline = LocalizationPipeline(
         scenario.tag_map, config, frame_truth=source.frame_truth,
         name=f"scenario:{scenario.name}", sinks=sinks,
+        premap=scenario_premap(scenario) if use_lidar else None,
     )  # fmt: skip
     run = pipeline.run(source)
     run.kidnaps_ns = list(scenario.kidnaps_ns)
     run.metadata.update(scenario_metadata(scenario, source))
+    run.metadata["lidar_used"] = use_lidar
     return run
 
 

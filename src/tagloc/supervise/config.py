@@ -62,6 +62,8 @@ class SupervisorConfig(StrictModel):
     status_rate_hz: float = Field(1.0, gt=0, le=100)
     odometry: HealthConfig = HealthConfig(timeout_s=0.5, expected_rate_hz=100.0)
     camera: HealthConfig = HealthConfig(timeout_s=1.0, expected_rate_hz=30.0)
+    #: The lidar's sweeps (a lidar fix source's input).
+    lidar: HealthConfig = HealthConfig(timeout_s=0.5, expected_rate_hz=10.0)
     ladder: LadderConfig = LadderConfig()
     #: Odometry stamped more than this (s) before the previous sample is a clock jumped back:
     #: the node starts over (smaller steps back are skipped and counted).

@@ -121,7 +121,7 @@ class Supervisor:
         self._inputs = {ODOMETRY: Liveness(odo.timeout_s, odo.expected_rate_hz)}
         for s in sources:
             if s.input not in self._inputs:
-                h = config.camera if s.role == "markers" else config.odometry
+                h = config.camera if s.role == "markers" else config.lidar
                 self._inputs[s.input] = Liveness(h.timeout_s, h.expected_rate_hz)
         self._quality = {
             s.name: FixQualityMonitor(
