@@ -7,7 +7,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Annotated
+
+import typer
 
 if TYPE_CHECKING:
     from tagloc.camera import CameraModel
@@ -16,6 +18,21 @@ if TYPE_CHECKING:
     from tagloc.tags import TagMap
 
 __all__ = ["BagCamera", "bag_camera", "check_bag_camera"]
+
+# The options both commands take, one definition each (parameter names give the option names).
+CamerasOpt = Annotated[Path | None, typer.Option(help="Kalibr camchain yaml.")]
+CameraPosesOpt = Annotated[
+    Path | None, typer.Option(help="camera_poses.yaml: T_body_cam (with --cameras).")
+]
+TagslamOpt = Annotated[
+    Path | None, typer.Option(help="tagslam.yaml: T_body_odom (odometry child in body).")
+]
+CornerOrderOpt = Annotated[str, typer.Option(help="How the bag lists corners, e.g. bl_br_tr_tl.")]
+OdomTopicOpt = Annotated[str, typer.Option(help="Odometry.")]
+DetectionsTopicOpt = Annotated[str, typer.Option(help="Tag corners.")]
+ImageTopicOpt = Annotated[str, typer.Option(help="Images.")]
+CameraInfoTopicOpt = Annotated[str, typer.Option(help="CameraInfo.")]
+TfTopicOpt = Annotated[str, typer.Option(help="Odometry as /tf (odom -> base).")]
 
 
 @dataclass(frozen=True, slots=True)

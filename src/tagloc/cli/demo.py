@@ -34,6 +34,9 @@ from rich.table import Table
 from tagloc.eval.report import REPORT_FILES
 
 if TYPE_CHECKING:
+    import numpy as np
+    import numpy.typing as npt
+
     from tagloc.eval import EvalSummary
     from tagloc.eval.drive_report import DriveSummary
     from tagloc.localize.run import LocalizationRun
@@ -63,6 +66,8 @@ class SurveyResult:
     seconds: float
     anchors: tuple[int, ...]
     grid_iou: float | None = None
+    #: ``(N, 3)`` premap points in ``map`` (None: a tags-only survey).
+    premap_map: npt.NDArray[np.float64] | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -105,13 +110,14 @@ def survey_and_build(
     config = sim_build_config(drive, observation_config)
     tag_map, report = build_tag_map(survey, T_map_anchor, config)
     texts = {out / "tags.yaml": tag_map.to_yaml_text(), out / "map_report.md": report.to_markdown()}
-    iou = None
+    iou, premap = None, None
     if lidar:
         built = build_products(survey, report, lidar_config=config.lidar)
         write_survey_outputs(
             texts, (out / "premap.ply", built.premap_map, "ply"), (out / "map.yaml", built.grid)
         )
         iou = occupancy_iou(built.grid, world).iou
+        premap = built.premap_map
     else:
         write_survey_outputs(texts)
     distance = float(drive.distance_m[-1] - drive.distance_m[0])
@@ -123,6 +129,7 @@ def survey_and_build(
         time.perf_counter() - start,
         tuple(e.id for e in tag_map.anchors),
         iou,
+        premap,
     )
 
 
@@ -173,13 +180,17 @@ def run_demo(
             files += [out / "map" / "premap.ply", out / "map" / "map.yaml"]
     # 2. localize the drive against the built map (and the true map for reference)
     source = ScenarioSource(scenario)  # the drive's detections, shared by both runs
-    with console.status("localizing against the true tag map"):
-        run_true = localize_scenario(scenario, source=source, lidar=False)  # the tag maps
+    use_lidar = lidar and world.robot.lidar is not None
+    with console.status("localizing against the true tag map (and the true premap)"):
+        run_true = localize_scenario(scenario, source=source, lidar=use_lidar)
     run_built = None
     if survey is not None:
-        with console.status("localizing against the built tag map"):
+        with console.status("localizing against the built tag map and premap"):
             built = replace(scenario, tag_map=survey.tag_map)
-            run_built = localize_scenario(built, source=source, lidar=False)
+            with_premap = use_lidar and survey.premap_map is not None
+            run_built = localize_scenario(
+                built, source=source, lidar=with_premap, premap=survey.premap_map
+            )
     # 3. evaluation reports, the picture, the table
     summaries = {"true map": write_report(run_true, out / "localize_true_map")}
     files += [out / "localize_true_map" / "report.html"]

@@ -15,6 +15,17 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
+from tagloc.cli.bag_camera import (
+    CameraInfoTopicOpt,
+    CameraPosesOpt,
+    CamerasOpt,
+    CornerOrderOpt,
+    DetectionsTopicOpt,
+    ImageTopicOpt,
+    OdomTopicOpt,
+    TagslamOpt,
+    TfTopicOpt,
+)
 from tagloc.cli.eval_cmd import eval_app
 from tagloc.cli.options import in_range
 
@@ -51,19 +62,15 @@ def eval_bag(
     tags: Annotated[Path, typer.Option(help="Surveyed tag map.")],
     out: Annotated[Path, typer.Option(help="Output directory.")] = Path("out/eval_bag"),
     config: Annotated[Path | None, typer.Option(help="localizer.yaml.")] = None,
-    cameras: Annotated[Path | None, typer.Option(help="Kalibr camchain yaml.")] = None,
-    camera_poses: Annotated[
-        Path | None, typer.Option(help="camera_poses.yaml: T_body_cam (with --cameras).")
-    ] = None,
-    tagslam: Annotated[
-        Path | None, typer.Option(help="tagslam.yaml: T_body_odom (odometry child in body).")
-    ] = None,
-    corner_order: Annotated[str, typer.Option(help="How the bag lists corners.")] = "tl_tr_br_bl",
-    odom_topic: Annotated[str, typer.Option(help="Odometry.")] = "/odom",
-    detections_topic: Annotated[str, typer.Option(help="Tag corners.")] = "/tag_detections",
-    image_topic: Annotated[str, typer.Option(help="Images.")] = "/camera/image",
-    camera_info_topic: Annotated[str, typer.Option(help="CameraInfo.")] = "/camera/camera_info",
-    tf_topic: Annotated[str, typer.Option(help="Odometry as /tf (odom -> base).")] = "/tf",
+    cameras: CamerasOpt = None,
+    camera_poses: CameraPosesOpt = None,
+    tagslam: TagslamOpt = None,
+    corner_order: CornerOrderOpt = "tl_tr_br_bl",
+    odom_topic: OdomTopicOpt = "/odom",
+    detections_topic: DetectionsTopicOpt = "/tag_detections",
+    image_topic: ImageTopicOpt = "/camera/image",
+    camera_info_topic: CameraInfoTopicOpt = "/camera/camera_info",
+    tf_topic: TfTopicOpt = "/tf",
     checkpoints: Annotated[
         Path | None, typer.Option(help="checkpoints.yaml (name, x, y, radius); default: stops.")
     ] = None,

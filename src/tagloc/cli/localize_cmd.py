@@ -18,6 +18,17 @@ from typing import TYPE_CHECKING, Annotated, Literal
 
 import typer
 
+from tagloc.cli.bag_camera import (
+    CameraInfoTopicOpt,
+    CameraPosesOpt,
+    CamerasOpt,
+    CornerOrderOpt,
+    DetectionsTopicOpt,
+    ImageTopicOpt,
+    OdomTopicOpt,
+    TagslamOpt,
+    TfTopicOpt,
+)
 from tagloc.cli.options import duration_range, in_range, seed_range
 from tagloc.fileutil import check_outputs
 
@@ -59,26 +70,20 @@ def localize(
     tags: Annotated[Path | None, typer.Option(help="Tag map (with a bag).")] = None,
     out: Annotated[Path, typer.Option(help="Output directory.")] = Path("out/localize"),
     config: Annotated[Path | None, typer.Option(help="localizer.yaml.")] = None,
-    cameras: Annotated[Path | None, typer.Option(help="Kalibr camchain yaml.")] = None,
-    camera_poses: Annotated[
-        Path | None, typer.Option(help="camera_poses.yaml: T_body_cam (with --cameras).")
-    ] = None,
-    tagslam: Annotated[
-        Path | None, typer.Option(help="tagslam.yaml: T_body_odom (odometry child in body).")
-    ] = None,
-    corner_order: Annotated[
-        str, typer.Option(help="How the bag lists corners, e.g. bl_br_tr_tl.")
-    ] = "tl_tr_br_bl",
-    odom_topic: Annotated[str, typer.Option(help="Odometry.")] = "/odom",
-    detections_topic: Annotated[str, typer.Option(help="Tag corners.")] = "/tag_detections",
-    image_topic: Annotated[str, typer.Option(help="Images.")] = "/camera/image",
-    camera_info_topic: Annotated[str, typer.Option(help="CameraInfo.")] = "/camera/camera_info",
+    cameras: CamerasOpt = None,
+    camera_poses: CameraPosesOpt = None,
+    tagslam: TagslamOpt = None,
+    corner_order: CornerOrderOpt = "tl_tr_br_bl",
+    odom_topic: OdomTopicOpt = "/odom",
+    detections_topic: DetectionsTopicOpt = "/tag_detections",
+    image_topic: ImageTopicOpt = "/camera/image",
+    camera_info_topic: CameraInfoTopicOpt = "/camera/camera_info",
     truth_topic: Annotated[str, typer.Option(help="Ground truth.")] = "/ground_truth",
     seed: Annotated[int, typer.Option(help="Scenario seed.", callback=seed_range)] = 0,
     duration: Annotated[
         float | None, typer.Option(help="Scenario: first N s only.", callback=duration_range)
     ] = None,
-    tf_topic: Annotated[str, typer.Option(help="Odometry as /tf (odom -> base).")] = "/tf",
+    tf_topic: TfTopicOpt = "/tf",
     lidar_topic: Annotated[str, typer.Option(help="Lidar sweeps (PointCloud2).")] = "/lidar/points",
     premap: Annotated[
         Path | None,

@@ -73,11 +73,9 @@ class Distortion(StrictModel):
         return self
 
 
-class CameraMount(StrictModel):
-    """``T_base_cam``: ``position`` (m, in ``base``) and either ``quat_xyzw`` of the optical frame
-    or ``rpy_deg``: roll, pitch, yaw of the camera *body* frame (x forward, y left, z up) in
-    ``base``, ``R = Rz(yaw) Ry(pitch) Rx(roll)`` (positive pitch looks down, REP-103), after which
-    the optical frame is ``R @ R_BODY_OPTICAL``; ``[0, 0, 0]`` is level and forward-looking."""
+class Mount(StrictModel):
+    """A sensor's pose on the robot: ``position`` (m, in ``base``) and either ``quat_xyzw`` or
+    ``rpy_deg`` (roll, pitch, yaw in ``base``, ``R = Rz(yaw) Ry(pitch) Rx(roll)``, degrees)."""
 
     position: Vec3
     quat_xyzw: tuple[float, float, float, float] | None = None
@@ -91,21 +89,33 @@ class CameraMount(StrictModel):
         return value if value is None else check_unit_quat(value)
 
     @model_validator(mode="after")
-    def _one_rotation(self) -> CameraMount:
+    def _one_rotation(self) -> Mount:
         if (self.quat_xyzw is None) == (self.rpy_deg is None):
             raise ValueError("give exactly one of 'quat_xyzw' or 'rpy_deg'")
         return self
 
-    def T_base_cam(self) -> SE3:
-        """Pose of the optical frame ``cam`` in ``base``."""
+    def _pose(self, R_body_frame: np.ndarray) -> SE3:
+        """The mounted frame in ``base``: ``quat_xyzw`` as given, or the ``rpy_deg`` body
+        rotation followed by ``R_body_frame`` (the sensor's own axis convention)."""
         if self.quat_xyzw is not None:
             return SE3.from_quat(self.quat_xyzw, self.position)
         assert self.rpy_deg is not None
         R_base_body = SO3.from_euler("xyz", self.rpy_deg, degrees=True).as_matrix()
         return SE3(
-            rotation=SO3.from_matrix(R_base_body @ R_BODY_OPTICAL),
+            rotation=SO3.from_matrix(R_base_body @ R_body_frame),
             translation=np.array(self.position),
         )
+
+
+class CameraMount(Mount):
+    """``T_base_cam``: ``position`` (m, in ``base``) and either ``quat_xyzw`` of the optical frame
+    or ``rpy_deg``: roll, pitch, yaw of the camera *body* frame (x forward, y left, z up) in
+    ``base``, ``R = Rz(yaw) Ry(pitch) Rx(roll)`` (positive pitch looks down, REP-103), after which
+    the optical frame is ``R @ R_BODY_OPTICAL``; ``[0, 0, 0]`` is level and forward-looking."""
+
+    def T_base_cam(self) -> SE3:
+        """Pose of the optical frame ``cam`` in ``base``."""
+        return self._pose(R_BODY_OPTICAL)
 
 
 class Camera(StrictModel):
@@ -154,35 +164,14 @@ class Camera(StrictModel):
         return np.array([[i.fx, 0.0, i.cx], [0.0, i.fy, i.cy], [0.0, 0.0, 1.0]])
 
 
-class LidarMount(StrictModel):
+class LidarMount(Mount):
     """``T_base_lidar``: ``position`` (m, in ``base``) and either ``quat_xyzw`` or ``rpy_deg``
     (roll, pitch, yaw of the scanner frame in ``base``, ``R = Rz(yaw) Ry(pitch) Rx(roll)``) of
     the scanner frame ``lidar`` (x forward, y left, z up; no optical convention)."""
 
-    position: Vec3
-    quat_xyzw: tuple[float, float, float, float] | None = None
-    rpy_deg: Angle3 | None = None
-
-    @field_validator("quat_xyzw")
-    @classmethod
-    def _check_quat(
-        cls, value: tuple[float, float, float, float] | None
-    ) -> tuple[float, float, float, float] | None:
-        return value if value is None else check_unit_quat(value)
-
-    @model_validator(mode="after")
-    def _one_rotation(self) -> LidarMount:
-        if (self.quat_xyzw is None) == (self.rpy_deg is None):
-            raise ValueError("give exactly one of 'quat_xyzw' or 'rpy_deg'")
-        return self
-
     def T_base_lidar(self) -> SE3:
         """Pose of the scanner frame ``lidar`` in ``base``."""
-        if self.quat_xyzw is not None:
-            return SE3.from_quat(self.quat_xyzw, self.position)
-        assert self.rpy_deg is not None
-        rotation = SO3.from_euler("xyz", self.rpy_deg, degrees=True)
-        return SE3(rotation=rotation, translation=np.array(self.position))
+        return self._pose(np.eye(3))
 
 
 class LidarConfig(StrictModel):

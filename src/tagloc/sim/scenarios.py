@@ -513,6 +513,7 @@ def localize_scenario(
     source: ScenarioSource | None = None,
     sinks: Sequence[OutputSink] = (),
     lidar: bool | None = None,
+    premap: npt.NDArray[np.float64] | None = None,
 ) -> LocalizationRun:
     """Localize a built scenario (see :func:`run_scenario`) through the message stream.
 
@@ -520,7 +521,9 @@ def localize_scenario(
     ``scenario.tag_map``, so runs of one drive against different maps can share it);
     ``sinks``: more sinks for the node's outputs as they happen. Unless the configuration sets
     ``tags.noise``, the tag sensor's ``sigma_px`` is the simulated detector's (as one calibrates
-    it on a real detector's corners). ``lidar``: as :func:`run_scenario`'s.
+    it on a real detector's corners). ``lidar``: as :func:`run_scenario`'s; ``premap``: the
+    ``(N, 3)`` points in ``map`` the lidar registers against (default: the world's true premap,
+    :func:`scenario_premap`; a survey's premap to localize against a built map).
 
     Raises
     ------
@@ -543,7 +546,7 @@ def localize_scenario(
     pipeline = LocalizationPipeline(
         scenario.tag_map, config, frame_truth=source.frame_truth,
         name=f"scenario:{scenario.name}", sinks=sinks,
-        premap=scenario_premap(scenario) if use_lidar else None,
+        premap=(scenario_premap(scenario) if premap is None else premap) if use_lidar else None,
     )  # fmt: skip
     run = pipeline.run(source)
     run.kidnaps_ns = list(scenario.kidnaps_ns)
