@@ -63,7 +63,7 @@ def demo(
         ),
     ] = [],  # noqa: B006
     no_lidar: Annotated[
-        bool, typer.Option("--no-lidar", help="Survey with tags and odometry only.")
+        bool, typer.Option("--no-lidar", help="Survey and localize with tags and odometry only.")
     ] = False,
 ) -> None:
     """Survey the built-in building, build its tag map, localize a drive against it, report."""

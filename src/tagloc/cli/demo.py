@@ -10,8 +10,9 @@ Steps of :func:`run_demo`:
    ``map``), and score the tags against the world's true poses and the grid against its walls.
    ``--no-lidar``: tags and odometry only.
 2. **Localize**: simulate a second drive (the default scenario, legged odometry) and localize it
-   through the same message stream a bag gives, against the *built* map; for reference, also
-   against the true (surveyed-by-hand) map.
+   through the same message stream a bag gives, with tag and lidar fixes against the *built*
+   tag map and premap; for reference, also against the true (surveyed-by-hand) map and the
+   world's true premap. ``--no-lidar``: tag fixes only.
 3. **Evaluate**: the evaluation report of each run (``report.html``, ``summary.json``, TUM
    files; :func:`tagloc.eval.write_report`), the floor-plan plot, the world used, and a summary
    table on the terminal.
