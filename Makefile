@@ -22,11 +22,13 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(BIN)/mypy
 
+# the suite runs on every core (pytest-xdist; one module's tests stay on one worker, so its
+# module fixtures are computed once)
 test: lint typecheck
-	MPLBACKEND=Agg $(BIN)/pytest -q
+	MPLBACKEND=Agg $(BIN)/pytest -q -n auto --dist loadscope
 
 test-slow: $(STAMP)
-	MPLBACKEND=Agg $(BIN)/pytest -q --runslow
+	MPLBACKEND=Agg $(BIN)/pytest -q -n auto --dist loadscope --runslow
 
 bench: $(STAMP)
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
