@@ -66,6 +66,18 @@ def test_short_survey_with_lidar_beats_tags_only() -> None:
     assert with_lidar.position_rms_m < 0.045
 
 
+def test_the_exported_graph_holds_every_scan_match_with_its_residual() -> None:
+    _, report, _ = _built("rooms", 3, True)
+    scans = [f for f in report.factors if f["type"] == "scan_match"]
+    m = report.scan_matching
+    assert len(scans) == m["sequential"] + m["loops"]
+    assert sum(f["loop"] for f in scans) == m["loops"]
+    assert all(f["keyframe_a"] != f["keyframe_b"] for f in scans)
+    # at the solution the registrations agree with the optimized keyframes to a few cm
+    assert np.median([f["translation_m"] for f in scans]) < 0.03
+    assert report.factors[0]["factors"] == len(report.factors) - 1
+
+
 def test_registrations_are_unbiased_and_their_covariance_honest() -> None:
     """Normalized errors of the consecutive registrations against the simulator's truth."""
     drive = _drive("rooms", 3)

@@ -290,7 +290,9 @@ def build_tag_map(
         survey, obs, solution, set(M_anchor), M_map_base_odometry, config, set(ambiguous)
     )
     object.__setattr__(report, "tilt_deg", map_tilt_deg(solution.M_map_base, up_base))
-    factors = graph_records(survey, obs, solution, M_odom_raw, state.c, held, priors, config)
+    factors = graph_records(
+        survey, obs, solution, M_odom_raw, state.c, held, priors, config, relative
+    )
     object.__setattr__(report, "factors", factors)
     timings["report"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t_start

@@ -21,7 +21,12 @@ tag's observations over time, then leave the bad ones out with ``--exclude``
   ``translation_m``, ``rotation_deg``, ``sigma`` (6 numbers, m and rad), ``whitened``;
 - ``gravity``: a keyframe's attitude prior (only with gravity priors): ``keyframe``,
   ``stamp_ns``, ``t_s``, ``tilt_deg`` (angle between the map's and the odometry's "up" in that
-  keyframe), ``whitened``.
+  keyframe), ``whitened``;
+- ``scan_match``: a lidar registration between keyframes ``keyframe_a`` and ``keyframe_b`` (only
+  with lidar, :mod:`tagloc.mapping.scan_factors`): ``t_a_s``, ``t_b_s``, ``loop`` (a loop
+  closure rather than consecutive keyframes), ``residual`` (``Log(Z^-1 x_a^-1 x_b)``),
+  ``translation_m``, ``rotation_deg``, ``whitened`` (the norm of the residual in the
+  registration's information, zero along its unconstrained directions).
 """
 
 from __future__ import annotations
@@ -37,6 +42,7 @@ from tagloc.mapping.calibration import calibration_from_vector, corrected_steps
 from tagloc.mapping.gravity import gravity_residuals, keyframe_tilts_deg
 from tagloc.mapping.initialize import inverse_h
 from tagloc.mapping.odometry_factors import log_batch
+from tagloc.mapping.scan_factors import RelativePoseFactors
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -71,6 +77,8 @@ class GraphAtSolution:
     up_base : (K, 3) float or None
         Gravity priors' "up" (None: no gravity priors).
     gravity_sigma_rad : float
+    relative : RelativePoseFactors or None
+        The lidar scan-matching factors (None: a survey without lidar).
     """
 
     source: str
@@ -92,6 +100,7 @@ class GraphAtSolution:
     held_sigmas: Mapping[int, FloatArray]
     up_base: FloatArray | None
     gravity_sigma_rad: float
+    relative: RelativePoseFactors | None = None
 
 
 def _num(x: float | np.floating[Any], digits: int = 6) -> float | None:
@@ -149,8 +158,28 @@ def factor_records(g: GraphAtSolution) -> list[dict[str, Any]]:
                 "type": "gravity", "keyframe": k, "stamp_ns": int(g.keyframe_stamps_ns[k]),
                 "t_s": _num(t_s[k], 4), "tilt_deg": _num(tilt[k], 4), "whitened": _num(w[k], 4),
             })  # fmt: skip
+    records += _scan_records(g, t_s)
     header = {
         "type": "header", "format": FORMAT, "version": VERSION, "source": g.source,
         "t0_ns": int(g.t0_ns), "keyframes": len(g.M_map_base), "factors": len(records),
     }  # fmt: skip
     return [header, *records]
+
+
+def _scan_records(g: GraphAtSolution, t_s: npt.NDArray[np.floating[Any]]) -> list[dict[str, Any]]:
+    """The ``scan_match`` records (none without lidar)."""
+    f = g.relative
+    if f is None or len(f) == 0:
+        return []
+    B = inverse_h(g.M_map_base[f.a]) @ g.M_map_base[f.b]
+    e = log_batch(inverse_h(f.M_a_b) @ B)
+    w = np.linalg.norm(np.einsum("nij,nj->ni", f.sqrt_information, e), axis=1)
+    records = []
+    for a, b, loop, r, wi in zip(f.a, f.b, f.loop, e, w, strict=True):
+        records.append({
+            "type": "scan_match", "keyframe_a": int(a), "keyframe_b": int(b),
+            "t_a_s": _num(t_s[a], 4), "t_b_s": _num(t_s[b], 4), "loop": bool(loop),
+            "residual": _vec(r), "translation_m": _num(np.linalg.norm(r[:3])),
+            "rotation_deg": _num(np.degrees(np.linalg.norm(r[3:])), 4), "whitened": _num(wi, 4),
+        })  # fmt: skip
+    return records

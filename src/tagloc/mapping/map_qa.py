@@ -31,6 +31,7 @@ from tagloc.mapping.report import (
     rms,
     tag_sigmas,
 )
+from tagloc.mapping.scan_factors import RelativePoseFactors
 from tagloc.mapping.survey import Survey
 from tagloc.tags.tagmap import TagEntry, TagMap
 
@@ -44,6 +45,7 @@ def graph_records(
     held: Mapping[int, np.ndarray],
     priors: Priors,
     config: MapBuildConfig,
+    relative: RelativePoseFactors | None = None,
 ) -> tuple[dict[str, Any], ...]:
     """Every factor with its residual at ``solution`` (:mod:`tagloc.mapping.graph_export`)."""
     at_solution = GraphAtSolution(
@@ -55,7 +57,7 @@ def graph_records(
         solution.mahalanobis, config.outlier_sigma, inverse_h(M_odom_raw[:-1]) @ M_odom_raw[1:],
         c, odometry_sigmas(M_odom_raw, config.odometry), held,
         {j: priors.anchor_sigmas.get(j, anchor_default_sigmas(config)) for j in held},
-        priors.up_base, float(np.radians(config.gravity.sigma_deg)),
+        priors.up_base, float(np.radians(config.gravity.sigma_deg)), relative,
     )  # fmt: skip
     return tuple(factor_records(at_solution))
 
