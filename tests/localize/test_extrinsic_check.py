@@ -11,8 +11,13 @@ import numpy as np
 import pytest
 
 from tagloc.geometry import SE3
-from tagloc.localize.extrinsic_check import check_extrinsics, check_run_extrinsics
+from tagloc.localize.extrinsic_check import (
+    ExtrinsicRecorder,
+    check_extrinsics,
+    check_run_extrinsics,
+)
 from tagloc.localize.intrinsic_check import check_camera
+from tagloc.localize.outputs import Estimate
 from tagloc.localize.run import FixAttempt
 
 S_NS = 1_000_000_000
@@ -105,6 +110,36 @@ def test_too_few_fixes_give_no_verdict() -> None:
     stamps, T_map_base, T_odom_base = _planar_drive(seed=5, n=300)
     fixes = _fixes(stamps, T_map_base, T_BASE_CAM_TRUE, seed=6)[:5]
     assert check_extrinsics(fixes, stamps, T_odom_base, T_BASE_CAM_TRUE) is None
+
+
+def _streamed(
+    recorder: ExtrinsicRecorder, stamps: np.ndarray, T_odom_base: SE3, fixes: list[FixAttempt]
+) -> None:
+    """Feed ``recorder`` as the node does: an estimate per odometry sample, each fix record
+    3 s after its stamp (when the held window releases it)."""
+    pending = list(fixes)
+    for k, stamp in enumerate(stamps.tolist()):
+        recorder.write(Estimate(stamp, T_odom_base[k], SE3.identity(), None, True, True,
+                                "map", "odom"))  # fmt: skip
+        while pending and pending[0].stamp_ns <= stamp - 3 * S_NS:
+            recorder.write(pending.pop(0))
+
+
+def test_the_streaming_recorder_agrees_with_the_whole_run_in_bounded_memory() -> None:
+    stamps, T_map_base, T_odom_base = _planar_drive(seed=7)
+    used = T_BASE_CAM_TRUE @ SE3.exp(MISSET)
+    fixes = _fixes(stamps, T_map_base, used, seed=8)
+    recorder = ExtrinsicRecorder(odometry_window=500)  # 5 s of 100 Hz odometry
+    _streamed(recorder, stamps, T_odom_base, fixes)
+    released = [f for f in fixes if f.stamp_ns <= stamps[-1] - 3 * S_NS]
+    oracle = check_extrinsics(released, stamps, T_odom_base, used)
+    check = recorder.check(used)
+    assert oracle is not None and check is not None
+    assert np.allclose(check.xi, oracle.xi, atol=1e-9) and check.n_pairs == oracle.n_pairs
+    assert len(recorder._stamps) == 500  # the odometry kept: the window, not the drive
+    capped = ExtrinsicRecorder(max_fixes=40, odometry_window=500)
+    _streamed(capped, stamps, T_odom_base, fixes)
+    assert [f.stamp_ns for f in capped.fixes] == [f.stamp_ns for f in fixes[:40]]
 
 
 def _wheel_scenario(duration_s: float):  # type: ignore[no-untyped-def]

@@ -19,6 +19,8 @@ observable components are compared with the thresholds (default 0.5 deg, 2 cm).
 from __future__ import annotations
 
 import math
+from bisect import bisect_right
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -107,27 +109,52 @@ class ExtrinsicCheck:
 
 
 class ExtrinsicRecorder:
-    """A node sink keeping what :func:`check_extrinsics` needs (accepted fixes, the odometry),
-    for a run whose outputs otherwise stream to files. :meth:`check` runs the check."""
+    """A node sink keeping what :func:`check_extrinsics` needs, in bounded memory.
 
-    def __init__(self) -> None:
+    Fix records reach the sinks a few seconds after their stamps (once no batch decision can
+    revise them), so the recorder keeps the odometry of the last ``odometry_window`` samples
+    (100 s at 200 Hz) and, for each accepted fix, the odometry interpolated at its stamp. It
+    keeps the first ``max_fixes`` accepted fixes (about 20 minutes of 30 Hz fixes): a
+    commissioning check needs minutes of driving, and a node that runs for days must not grow.
+    """
+
+    def __init__(self, max_fixes: int = 36_000, odometry_window: int = 20_000) -> None:
         self.fixes: list[FixAttempt] = []
-        self._stamps: list[int] = []
-        self._odom: list[SE3] = []
+        self.max_fixes = max_fixes
+        self._T_odom_at_fix: list[SE3] = []
+        self._stamps: deque[int] = deque(maxlen=odometry_window)
+        self._odom: deque[SE3] = deque(maxlen=odometry_window)
 
     def write(self, output: NodeOutput) -> None:
         if isinstance(output, Estimate):
+            if self._stamps and output.stamp_ns <= self._stamps[-1]:
+                self._stamps.clear()  # the clock jumped back: the node started over
+                self._odom.clear()
             self._stamps.append(output.stamp_ns)
             self._odom.append(output.T_odom_base)
-        elif isinstance(output, FixAttempt) and output.accepted:
+        elif (
+            isinstance(output, FixAttempt) and output.accepted
+            and len(self.fixes) < self.max_fixes and self._stamps
+        ):  # fmt: skip
             self.fixes.append(output)
+            self._T_odom_at_fix.append(self._odometry_at(output.stamp_ns))
+
+    def _odometry_at(self, stamp_ns: int) -> SE3:
+        """The odometry at ``stamp_ns``, interpolated between the two samples around it."""
+        i = bisect_right(self._stamps, stamp_ns)
+        lo, hi = max(i - 1, 0), min(i, len(self._stamps) - 1)
+        stamps = np.array([self._stamps[lo], self._stamps[hi]], dtype=np.int64)
+        poses = SE3.stack([self._odom[lo], self._odom[hi]])
+        return _odometry_at(stamps, poses, np.array([stamp_ns], dtype=np.int64))[0]
 
     def check(self, T_base_cam: SE3 | None, **options: Any) -> ExtrinsicCheck | None:
         """:func:`check_extrinsics` over what was recorded (None without extrinsics)."""
-        if T_base_cam is None or len(self._stamps) < 2:
+        if T_base_cam is None or len(self.fixes) < 2:
             return None
-        stamps = np.array(self._stamps, dtype=np.int64)
-        return check_extrinsics(self.fixes, stamps, SE3.stack(self._odom), T_base_cam, **options)
+        stamps = np.array([f.stamp_ns for f in self.fixes], dtype=np.int64)
+        order = np.argsort(stamps, kind="stable")
+        T_odom = SE3.stack([self._T_odom_at_fix[k] for k in order])
+        return check_extrinsics(self.fixes, stamps[order], T_odom, T_base_cam, **options)
 
 
 def check_run_extrinsics(
