@@ -180,8 +180,8 @@ def run_demo(
         if lidar:
             files += [out / "map" / "premap.ply", out / "map" / "map.yaml"]
     # 2. localize the drive against the built map (and the true map for reference)
-    source = ScenarioSource(scenario)  # the drive's detections, shared by both runs
     use_lidar = lidar and world.robot.lidar is not None
+    source = ScenarioSource(scenario, lidar=use_lidar)  # the drive's stream, shared by both runs
     with console.status("localizing against the true tag map (and the true premap)"):
         run_true = localize_scenario(scenario, source=source, lidar=use_lidar)
     run_built = None
