@@ -33,7 +33,7 @@ from tagloc.lidar.cloud import deskew
 from tagloc.lidar.fix import lidar_fix
 from tagloc.localize.events import APPLIED, FilterEvent
 from tagloc.localize.fix import FixQuality, LocalizeError, PartialFix
-from tagloc.localize.gating import chi2_threshold
+from tagloc.localize.projected_update import planar_constraint
 from tagloc.localize.run import FixAttempt
 from tagloc.messages import PointCloudMsg
 
@@ -211,7 +211,12 @@ class LidarScans:
         )  # fmt: skip
         event = self.filter.update_partial(partial)
         self._held.hold(_attempt(stamp, fix.T_map_base, partial, event.kind.value))
-        self._lidar_judged(event, partial.k)
+        k = (
+            planar_constraint(partial.basis, partial.cov)[1].shape[0]
+            if self.filter.planar
+            else partial.k
+        )
+        self._lidar_judged(event, k)
         return None
 
     def _sweep_motion(self, stamp: int, T_base_lidar: SE3) -> Callable[[np.ndarray], SE3]:
@@ -234,18 +239,15 @@ class LidarScans:
         if self.skipped[reason] == 1:
             logger.info("lidar sweep skipped (%s): %s; further ones are counted", reason, detail)
 
-    def _lidar_judged(self, event: FilterEvent, k: int) -> None:
-        """The supervisor's quality books (NIS per measured direction); an accepted fix that
+    def _lidar_judged(self, event: FilterEvent, dof: int) -> None:
+        """The supervisor's quality books (NIS per measured direction, ``dof`` the directions
+        the filter measured: after the planar projection in planar mode); an accepted fix that
         measures every direction of the filter counts as the last fix (as a tag fix does)."""
         accepted = event.kind.value in APPLIED
-        dof = k
-        if self.filter.planar and event.threshold is not None:  # the planar projection's k
-            q = self.config.gates.chi2_quantile
-            dof = next((d for d in (1, 2, 3) if chi2_threshold(q, d) == event.threshold), k)
         if accepted and dof >= self.filter.dof:
             self._fix_ns = max(self._fix_ns or event.stamp_ns, event.stamp_ns)
             self._fix_odometer_m = self._odometer_m
-        nis = math.nan if event.d2 is None else event.d2 / dof
+        nis = math.nan if event.d2 is None or dof == 0 else event.d2 / dof
         self.supervisor.on_fix(LIDAR, accepted, nis, math.nan)
 
 
