@@ -88,10 +88,12 @@ def deskew(
     return moved
 
 
-def voxel_downsample(points: npt.ArrayLike, voxel_m: float) -> np.ndarray:
+def voxel_downsample(points: npt.ArrayLike, voxel_m: float, *, centred: bool = False) -> np.ndarray:
     """The centroid of the points in each occupied cube of edge ``voxel_m`` (metres).
 
-    Cubes are aligned with the frame's axes at multiples of ``voxel_m``. Non-finite rows are
+    Cubes are aligned with the frame's axes: their faces at multiples of ``voxel_m``, or with
+    ``centred`` their centres (so a wall on a round coordinate, x = 0 or y = 9.0, falls in the
+    middle of one layer of cubes rather than on the boundary between two). Non-finite rows are
     dropped first. Output rows are ordered by voxel index (deterministic).
 
     Returns
@@ -103,8 +105,13 @@ def voxel_downsample(points: npt.ArrayLike, voxel_m: float) -> np.ndarray:
     finite = finite_points(points)
     if finite.shape[0] == 0:
         return finite
-    keys = np.floor(finite / voxel_m).astype(np.int64)
-    _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    keys = np.floor(finite / voxel_m + (0.5 if centred else 0.0)).astype(np.int64)
+    keys -= keys.min(axis=0)
+    if keys.max() < 2**21:  # one int64 per voxel (same order as the rows): a fast 1D unique
+        flat = (keys[:, 0] << 42) | (keys[:, 1] << 21) | keys[:, 2]
+        _, inverse, counts = np.unique(flat, return_inverse=True, return_counts=True)
+    else:
+        _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
     inverse = inverse.reshape(-1)
     sums = [np.bincount(inverse, weights=finite[:, k], minlength=counts.shape[0]) for k in range(3)]
-    return np.stack(sums, axis=1) / counts[:, None]
+    return np.asarray(np.stack(sums, axis=1) / counts[:, None])

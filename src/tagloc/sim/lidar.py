@@ -26,6 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tagloc.geometry import SE3, SO3
+from tagloc.lidar.cloud import voxel_downsample
 from tagloc.messages import PointCloudMsg
 from tagloc.sim.lidar_cast import (
     HIT_FLOOR,
@@ -41,7 +42,7 @@ from tagloc.sim.people import Person, people_xy
 from tagloc.sim.robot import LidarConfig
 from tagloc.sim.world import Wall, World
 
-__all__ = ["LIDAR_FRAME", "LidarSimulator", "Sweep", "premap_from_world", "voxel_centroids"]
+__all__ = ["LIDAR_FRAME", "LidarSimulator", "Sweep", "premap_from_world"]
 
 FloatArray = npt.NDArray[np.float64]
 LIDAR_FRAME = "lidar"
@@ -256,26 +257,6 @@ class _Table:
         return self.rows
 
 
-def voxel_centroids(points: FloatArray, voxel_m: float) -> FloatArray:
-    """The centroid of the points in each occupied ``voxel_m`` cube (a plain numpy voxel grid).
-
-    The cubes are centred on multiples of ``voxel_m``, so a wall on a round coordinate (x = 0,
-    y = 9.0) falls in the middle of a layer of cubes, not on a boundary between two."""
-    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    if not len(pts):
-        return pts.copy()
-    keys = np.floor(pts / voxel_m + 0.5).astype(np.int64)  # centred on multiples of voxel_m
-    keys -= keys.min(axis=0)
-    if keys.max() < 2**21:  # one int64 per voxel: a 1D unique, much faster than rows
-        flat = (keys[:, 0] << 42) | (keys[:, 1] << 21) | keys[:, 2]
-        _, inverse, counts = np.unique(flat, return_inverse=True, return_counts=True)
-    else:
-        _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
-    inverse = inverse.reshape(-1)
-    sums = np.stack([np.bincount(inverse, pts[:, k], len(counts)) for k in range(3)], axis=1)
-    return np.asarray(sums / counts[:, None])
-
-
 def premap_from_world(
     world: World,
     T_map_base: SE3,
@@ -317,4 +298,4 @@ def premap_from_world(
     picks = np.flatnonzero(np.diff(marks, prepend=-1.0) > 0)
     clouds = [sim.scan_at(T_map_base[int(i)])[0] for i in picks]
     merged = np.concatenate(clouds) if clouds else np.zeros((0, 3))
-    return voxel_centroids(merged, voxel_m)
+    return voxel_downsample(merged, voxel_m, centred=True)
