@@ -81,22 +81,32 @@ def _kind_names(kinds: tuple[type[Message], ...]) -> str:
     return ", ".join(k.__name__ for k in kinds) or "every message"
 
 
-def _windowed(
-    fault: DropMessages | DuplicateMessages, stream: Stream, t0_ns: int
-) -> Iterator[tuple[str, Message, bool]]:
-    """Each message and whether the fault's window and kinds hit it (logged once)."""
-    lo, hi = t0_ns + round(fault.start_s * S_NS), t0_ns + round(fault.end_s * S_NS)
-    logged = False
-    for topic, msg in stream:
-        hit = lo <= msg.stamp_ns < hi and _matches(msg, fault.kinds)
-        if hit and not logged:
-            logger.info("fault: %s", fault.describe())
-            logged = True
-        yield topic, msg, hit
+@dataclass(frozen=True, slots=True)
+class _WindowFault:
+    """A fault on the messages of ``kinds`` (empty: every record) stamped in
+    ``[start_s, end_s)``, seconds after ``t0_ns``."""
+
+    start_s: float
+    end_s: float
+    kinds: tuple[type[Message], ...] = ()
+
+    def describe(self) -> str:
+        raise NotImplementedError
+
+    def _windowed(self, stream: Stream, t0_ns: int) -> Iterator[tuple[str, Message, bool]]:
+        """Each message and whether the window and kinds hit it (the fault logged once)."""
+        lo, hi = t0_ns + round(self.start_s * S_NS), t0_ns + round(self.end_s * S_NS)
+        logged = False
+        for topic, msg in stream:
+            hit = lo <= msg.stamp_ns < hi and _matches(msg, self.kinds)
+            if hit and not logged:
+                logger.info("fault: %s", self.describe())
+                logged = True
+            yield topic, msg, hit
 
 
 @dataclass(frozen=True, slots=True)
-class DropMessages:
+class DropMessages(_WindowFault):
     """Messages of ``kinds`` stamped in ``[start_s, end_s)`` are lost (a sensor unplugged, a
     driver stalled).
 
@@ -108,12 +118,8 @@ class DropMessages:
         Record types dropped (empty: every record).
     """
 
-    start_s: float
-    end_s: float
-    kinds: tuple[type[Message], ...] = ()
-
     def apply(self, stream: Stream, t0_ns: int) -> Iterator[tuple[str, Message]]:
-        for topic, msg, hit in _windowed(self, stream, t0_ns):
+        for topic, msg, hit in self._windowed(stream, t0_ns):
             if not hit:
                 yield topic, msg
 
@@ -122,7 +128,7 @@ class DropMessages:
 
 
 @dataclass(frozen=True, slots=True)
-class DuplicateMessages:
+class DuplicateMessages(_WindowFault):
     """Every message of ``kinds`` stamped in ``[start_s, end_s)`` is delivered twice in a row
     (a publisher started twice, a bag merged with itself).
 
@@ -134,12 +140,8 @@ class DuplicateMessages:
         Record types repeated (empty: every record).
     """
 
-    start_s: float
-    end_s: float
-    kinds: tuple[type[Message], ...] = ()
-
     def apply(self, stream: Stream, t0_ns: int) -> Iterator[tuple[str, Message]]:
-        for topic, msg, hit in _windowed(self, stream, t0_ns):
+        for topic, msg, hit in self._windowed(stream, t0_ns):
             yield topic, msg
             if hit:
                 yield topic, msg
