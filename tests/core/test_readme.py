@@ -1,4 +1,5 @@
-"""The README's file examples are real: its tags.yaml loads, its localizer.yaml is the defaults."""
+"""The documented file examples are real: the tags.yaml of docs/file-formats.md loads, its
+localizer.yaml is the defaults."""
 
 from __future__ import annotations
 
@@ -8,8 +9,8 @@ from pathlib import Path
 from tagloc.localize import LocalizerConfig
 from tagloc.tags import TagMap
 
-README = (Path(__file__).resolve().parents[2] / "README.md").read_text(encoding="utf-8")
-BLOCKS = re.findall(r"```yaml\n(.*?)```", README, re.S)
+DOC = (Path(__file__).resolve().parents[2] / "docs" / "file-formats.md").read_text(encoding="utf-8")
+BLOCKS = re.findall(r"```yaml\n(.*?)```", DOC, re.S)
 
 
 def test_the_tag_map_example_loads() -> None:
