@@ -14,6 +14,7 @@ from tagloc.cli.eval_tags_cmd import eval_tags  # noqa: F401  (registers tagloc 
 from tagloc.cli.map_cmd import map_app
 from tagloc.cli.options import duration_range, in_range, seed_range
 from tagloc.cli.sim_cmd import sim_app
+from tagloc.cli.tags_cmd import tags_app
 from tagloc.cli.world_cmd import coverage
 
 app = typer.Typer(
@@ -32,6 +33,7 @@ app.add_typer(world_app, name="world")
 app.add_typer(map_app, name="map")
 app.add_typer(eval_app, name="eval")
 app.add_typer(sim_app, name="sim")
+app.add_typer(tags_app, name="tags")
 app.command("localize")(localize_cmd.localize)
 
 WorldOption = Annotated[
