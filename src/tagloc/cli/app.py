@@ -8,6 +8,7 @@ from typing import Annotated
 import typer
 
 from tagloc.cli import localize_cmd
+from tagloc.cli.detect_cmd import detect
 from tagloc.cli.eval_bag_cmd import eval_bag  # noqa: F401  (registers tagloc eval bag)
 from tagloc.cli.eval_cmd import eval_app
 from tagloc.cli.eval_tags_cmd import eval_tags  # noqa: F401  (registers tagloc eval tags)
@@ -35,6 +36,7 @@ app.add_typer(eval_app, name="eval")
 app.add_typer(sim_app, name="sim")
 app.add_typer(tags_app, name="tags")
 app.command("localize")(localize_cmd.localize)
+app.command("detect")(detect)
 
 WorldOption = Annotated[
     Path | None,

@@ -82,15 +82,25 @@ def _page(layout: SheetLayout, placements: tuple[TagPlacement, ...], number: int
     bar = scale_bar_mm(width_mm)
     size_mm = 1000.0 * layout.size_m
     header_y = height_mm - MARGIN_MM - HEADER_MM / 2
-    ax.text(MARGIN_MM, header_y + 2.5, PRINT_NOTE.format(bar=bar), fontsize=8.5,
-            va="center", ha="left", weight="bold")  # fmt: skip
     ax.text(
-        MARGIN_MM, header_y - 2.5,
+        MARGIN_MM,
+        header_y + 2.5,
+        PRINT_NOTE.format(bar=bar),
+        fontsize=8.5,
+        va="center",
+        ha="left",
+        weight="bold",
+    )
+    ax.text(
+        MARGIN_MM,
+        header_y - 2.5,
         f"{layout.family}, black-border edge {size_mm:g} mm (the 'size' in tags.yaml: "
         f"{layout.size_m:g} m); cut along the marks, keep the white border. "
         f"Page {number} of {len(layout.pages)}.",
-        fontsize=7, va="center", ha="left",
-    )  # fmt: skip
+        fontsize=7,
+        va="center",
+        ha="left",
+    )
     for placement in placements:
         _draw_tag(ax, layout.family, placement)
     _scale_bar(ax, MARGIN_MM, MARGIN_MM + FOOTER_MM / 2 - 2.0, bar)
@@ -101,20 +111,43 @@ def _draw_tag(ax: Axes, family: str, p: TagPlacement) -> None:
     """The bitmap over the black-border square plus quiet zone, the label and the cut marks."""
     bitmap = tag_bitmap(family, p.tag_id, cells_px=1, quiet_zone_cells=0)
     ax.imshow(
-        bitmap, cmap="gray", vmin=0, vmax=255, interpolation="none", aspect="auto",
-        extent=(p.x_mm, p.x_mm + p.size_mm, p.y_mm, p.y_mm + p.size_mm), zorder=2,
-    )  # fmt: skip
+        bitmap,
+        cmap="gray",
+        vmin=0,
+        vmax=255,
+        interpolation="none",
+        aspect="auto",
+        extent=(p.x_mm, p.x_mm + p.size_mm, p.y_mm, p.y_mm + p.size_mm),
+        zorder=2,
+    )
     bx, by, bw, bh = p.cut_box_mm
     label_mm = p.y_mm - p.quiet_mm - by
-    ax.text(bx + bw / 2, by + label_mm / 2,
-            f"{family}  id {p.tag_id}  size {p.size_mm:g} mm",
-            fontsize=min(9.0, max(4.0, bw / 8)), ha="center", va="center")  # fmt: skip
-    for cx, cy, sx, sy in ((bx, by, -1, -1), (bx + bw, by, 1, -1), (bx, by + bh, -1, 1),
-                           (bx + bw, by + bh, 1, 1)):  # fmt: skip
-        ax.plot([cx + sx * _CUT_GAP_MM, cx + sx * (_CUT_GAP_MM + _CUT_LEN_MM)], [cy, cy],
-                color="black", lw=0.3)  # fmt: skip
-        ax.plot([cx, cx], [cy + sy * _CUT_GAP_MM, cy + sy * (_CUT_GAP_MM + _CUT_LEN_MM)],
-                color="black", lw=0.3)  # fmt: skip
+    ax.text(
+        bx + bw / 2,
+        by + label_mm / 2,
+        f"{family}  id {p.tag_id}  size {p.size_mm:g} mm",
+        fontsize=min(9.0, max(4.0, bw / 8)),
+        ha="center",
+        va="center",
+    )
+    for cx, cy, sx, sy in (
+        (bx, by, -1, -1),
+        (bx + bw, by, 1, -1),
+        (bx, by + bh, -1, 1),
+        (bx + bw, by + bh, 1, 1),
+    ):
+        ax.plot(
+            [cx + sx * _CUT_GAP_MM, cx + sx * (_CUT_GAP_MM + _CUT_LEN_MM)],
+            [cy, cy],
+            color="black",
+            lw=0.3,
+        )
+        ax.plot(
+            [cx, cx],
+            [cy + sy * _CUT_GAP_MM, cy + sy * (_CUT_GAP_MM + _CUT_LEN_MM)],
+            color="black",
+            lw=0.3,
+        )
 
 
 def _scale_bar(ax: Axes, x_mm: float, y_mm: float, length_mm: float) -> None:
@@ -123,8 +156,9 @@ def _scale_bar(ax: Axes, x_mm: float, y_mm: float, length_mm: float) -> None:
 
     for k in range(round(length_mm / 10)):
         face = "black" if k % 2 == 0 else "white"
-        ax.add_patch(Rectangle((x_mm + 10 * k, y_mm), 10.0, 2.0, facecolor=face,
-                               edgecolor="black", lw=0.3))  # fmt: skip
+        ax.add_patch(
+            Rectangle((x_mm + 10 * k, y_mm), 10.0, 2.0, facecolor=face, edgecolor="black", lw=0.3)
+        )
     for k in range(round(length_mm / 10) + 1):
         ax.text(x_mm + 10 * k, y_mm - 1.0, f"{10 * k}", fontsize=5, ha="center", va="top")
     note = f"{length_mm:.0f} mm: measure this bar on the print"
