@@ -18,6 +18,18 @@ from tagloc.cli.sim_cmd import sim_app
 from tagloc.cli.tags_cmd import tags_app
 from tagloc.cli.world_cmd import coverage
 
+
+def _version(value: bool) -> None:
+    if value:
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            typer.echo(f"tagloc {version('tagloc')}")
+        except PackageNotFoundError:  # a source tree that was never installed
+            typer.echo("tagloc (not installed: version unknown)")
+        raise typer.Exit()
+
+
 app = typer.Typer(
     name="tagloc",
     help="Fiducial-tag localization for indoor robots whose odometry drifts.",
@@ -37,6 +49,19 @@ app.add_typer(sim_app, name="sim")
 app.add_typer(tags_app, name="tags")
 app.command("localize")(localize_cmd.localize)
 app.command("detect")(detect)
+
+
+@app.callback()
+def _root(
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version", help="Print the version and exit.", callback=_version, is_eager=True
+        ),
+    ] = False,
+) -> None:
+    """Fiducial-tag localization for indoor robots whose odometry drifts."""
+
 
 WorldOption = Annotated[
     Path | None,
