@@ -161,10 +161,60 @@ def test_bad_input_is_one_line_and_writes_nothing(tmp_path: Path) -> None:
     out = tmp_path / "out"
     for args, words in (
         ((str(tmp_path / "notes.png"), "--camera", str(camera)), "notes.png: not an image"),
-        ((str(tmp_path / "view.png"), "--camera", str(other)), "640"),
+        (
+            (str(tmp_path / "view.png"), "--camera", str(other)),
+            "1280x720 px but the camera file is for 640x720",
+        ),
         ((str(tmp_path), "--camera", str(camera)), "notes.png: not an image"),  # a directory
         ((str(tmp_path / "view.png"), "--camera", str(tmp_path / "view.png")), "camera"),
     ):
         line = one_error_line(run_tagloc("detect", *args, "--size", "0.16", "--out", str(out)))
         assert words in line, line
         assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_detect_reads_the_images_of_a_bag(tmp_path: Path) -> None:
+    from tagloc.io import BagSink, ImageMsg
+
+    camera = _camera_file(tmp_path / "cam.yaml", SWEEP)
+    image, tag_map = _three_tags(0.16)
+    (tmp_path / "tags.yaml").write_text(tag_map.to_yaml_text())
+    bag = tmp_path / "drive.mcap"
+    with BagSink(bag, "mcap") as sink:
+        for k in range(4):
+            sink.write("/camera/image", ImageMsg(10**9 * (k + 1), "camera_optical", image, "mono8"))
+    out = tmp_path / "out"
+    done = run_tagloc(
+        "detect",
+        str(bag),
+        "--camera",
+        str(camera),
+        "--tags",
+        str(tmp_path / "tags.yaml"),
+        "--max-frames",
+        "2",
+        "--out",
+        str(out),
+    )
+    assert done.returncode == 0, done.stderr
+    frames = json.loads((out / "detections.json").read_text())["frames"]
+    assert [f["image"].split("_")[1] for f in frames] == ["000000", "000002"]  # every other frame
+    for frame in frames:
+        assert sorted(t["id"] for t in frame["tags"]) == [3, 5, 7]
+        assert not any("not the map's" in n for n in frame["notes"])  # all of the map's size
+    assert len(list(out.glob("frame_*.detect.png"))) == 2
+    line = one_error_line(
+        run_tagloc(
+            "detect",
+            str(bag),
+            "--camera",
+            str(camera),
+            "--size",
+            "0.16",
+            "--image-topic",
+            "/nope",
+            "--out",
+            str(tmp_path / "o2"),
+        )
+    )
+    assert "/nope" in line and "/camera/image" in line and not (tmp_path / "o2").exists()

@@ -34,6 +34,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tagloc.camera import CameraModel, check_image
+from tagloc.errors import CameraModelError
 from tagloc.geometry import SE3
 from tagloc.localize import FixQuality, QualityLimits
 from tagloc.localize.config import LocalizerConfig
@@ -156,6 +157,13 @@ def check_frame(
         The image's size is not the camera's.
     """
     # 1. image size
+    height, width = np.shape(image)[:2]
+    if (width, height) != tuple(camera.image_size):
+        raise CameraModelError(
+            f"{name}: the image is {width}x{height} px but the camera file is for "
+            f"{camera.image_size[0]}x{camera.image_size[1]} px (a calibration of another "
+            "resolution or another camera)"
+        )
     check_image(image, camera, name)
     gray = as_gray_u8(image, name)
     # 2. detections, and the mirrored ones
