@@ -4,6 +4,7 @@ was asked for. Skipped with a message where pdftoppm is missing (``make test`` i
 
 from __future__ import annotations
 
+import functools
 import shutil
 import subprocess
 from pathlib import Path
@@ -33,14 +34,20 @@ def _rasterize(pdf: Path, out_dir: Path) -> list[np.ndarray]:
     return [cv2.imread(str(p), cv2.IMREAD_GRAYSCALE) for p in pages]
 
 
+@functools.cache
+def _apriltag_detector(family: str):  # type: ignore[no-untyped-def]
+    """One AprilTag detector per family for the whole module (creating and freeing many in one
+    process has crashed pupil-apriltags)."""
+    from pupil_apriltags import Detector
+
+    return Detector(families=family)
+
+
 def _decode(family: str, image: np.ndarray) -> list[tuple[int, np.ndarray]]:
     """``(id, corners (4, 2) px)`` of every tag the reference library finds."""
     if family.startswith("tag"):
-        from pupil_apriltags import Detector
-
-        return [
-            (int(d.tag_id), np.asarray(d.corners)) for d in Detector(families=family).detect(image)
-        ]
+        found = _apriltag_detector(family).detect(image)
+        return [(int(d.tag_id), np.asarray(d.corners)) for d in found]
     name = "DICT_" + family.removeprefix("aruco_").upper()
     detector = cv2.aruco.ArucoDetector(
         cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, name)),
