@@ -22,12 +22,22 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(BIN)/mypy
 
+# poppler's pdftoppm rasterizes the printed tag sheets in the tests (apt-get only where it is
+# missing and apt-get exists; without it those tests skip with a message)
+TOOLS_STAMP := $(VENV)/.test-tools
+
+$(TOOLS_STAMP): $(STAMP)
+	@command -v pdftoppm >/dev/null 2>&1 || { command -v apt-get >/dev/null 2>&1 && \
+		{ apt-get install -y -q poppler-utils >/dev/null 2>&1 || \
+		  echo "note: could not install poppler-utils; the tag-sheet tests will skip"; }; } || true
+	@touch $(TOOLS_STAMP)
+
 # the suite runs on every core (pytest-xdist; one module's tests stay on one worker, so its
 # module fixtures are computed once)
-test: lint typecheck
+test: lint typecheck $(TOOLS_STAMP)
 	MPLBACKEND=Agg $(BIN)/pytest -q -n auto --dist loadscope
 
-test-slow: $(STAMP)
+test-slow: $(STAMP) $(TOOLS_STAMP)
 	MPLBACKEND=Agg $(BIN)/pytest -q -n auto --dist loadscope --runslow
 
 bench: $(STAMP)

@@ -45,6 +45,12 @@ def test_demo_surveys_localizes_and_writes_the_reports(tmp_path: Path) -> None:
             < summary["estimators"]["odometry"]["ate_rmse_m"]
         )
         assert {"report.html", "fused.tum", "truth.tum"} <= {p.name for p in (out / run).iterdir()}
+    # the two reports: distinct titles, each saying which map it used
+    runs = ("localize", "localize_true_map")
+    html = {run: (out / run / "report.html").read_text() for run in runs}
+    titles = {run: text.split("<title>")[1].split("</title>")[0] for run, text in html.items()}
+    assert "built tag map" in titles["localize"] and "true tag map" in titles["localize_true_map"]
+    assert str(out / "map" / "tags.yaml") in html["localize"]
 
 
 def test_demo_quick_skips_the_survey(tmp_path: Path) -> None:

@@ -37,6 +37,16 @@ DIFF_LINES = [  # sorted by (family, id)
 ]
 
 
+def _summary(old: Path, new: Path, removed: int, moved: int, changed: int) -> str:
+    """The last line of ``map diff``: the counts of the lines above it."""
+    total = removed + moved + changed
+    return (
+        f"{total} change{'s' if total != 1 else ''}: 0 added, {removed} removed, {moved} moved, "
+        f"{changed} changed field{'s' if changed != 1 else ''}, 0 frame(s) added or removed "
+        f"({old} -> {new})"
+    )
+
+
 @pytest.fixture
 def maps(tmp_path: Path) -> tuple[Path, Path, Path]:
     good, new, bad = tmp_path / "tags.yaml", tmp_path / "new.yaml", tmp_path / "bad.yaml"
@@ -72,13 +82,17 @@ def test_diff_prints_changes_and_exits_0_or_1_with_exit_code(
     good, new, bad = maps
     result = run_tagloc("map", "diff", str(good), str(new))
     assert result.returncode == 0, result.stderr
-    assert result.stdout.splitlines() == DIFF_LINES
+    assert result.stdout.splitlines() == [*DIFF_LINES, _summary(good, new, 1, 1, 1)]
     assert run_tagloc("map", "diff", "--exit-code", str(good), str(new)).returncode == 1
     same = run_tagloc("map", "diff", "--exit-code", str(good), str(good))
     assert same.returncode == 0 and same.stdout == f"no differences: {good} {good}\n"
     # a larger threshold hides the 3 cm move
     result = run_tagloc("map", "diff", "--min-move-cm", "5", str(good), str(new))
-    assert result.stdout.splitlines() == [DIFF_LINES[0], DIFF_LINES[1]]
+    assert result.stdout.splitlines() == [
+        DIFF_LINES[0],
+        DIFF_LINES[1],
+        _summary(good, new, 1, 0, 1),
+    ]
     broken = run_tagloc("map", "diff", str(good), str(bad))
     assert broken.returncode == 1 and broken.stderr.startswith(f"tagloc: error: {bad}: tags[2]")
 
@@ -98,7 +112,7 @@ def test_the_typer_app_directly(maps: tuple[Path, Path, Path]) -> None:
     result = runner.invoke(map_app, ["check", str(good)])
     assert result.exit_code == 0 and result.output == f"{good}: ok: {SUMMARY}\n"
     result = runner.invoke(map_app, ["diff", str(good), str(new)])
-    assert result.exit_code == 0 and result.output.splitlines() == DIFF_LINES
+    assert result.exit_code == 0 and result.output.splitlines()[:-1] == DIFF_LINES
     assert runner.invoke(map_app, ["diff", "--exit-code", str(good), str(new)]).exit_code == 1
     result = runner.invoke(map_app, ["check", str(bad)])
     assert isinstance(result.exception, TagMapError)  # main() turns it into one line, exit 1

@@ -7,16 +7,48 @@ else is a bug and keeps its traceback. Heavy modules are imported inside the com
 
 from __future__ import annotations
 
+import inspect
+import os
 import sys
+
+import typer
+import typer.rich_utils
 
 from tagloc.cli.app import app
 from tagloc.errors import TaglocError
 
+#: Width of the help when the output is not a terminal (a pipe, a file, ``less``) and neither
+#: ``COLUMNS`` nor ``TERMINAL_WIDTH`` says otherwise: rich would use 80.
+HELP_WIDTH = 120
+
 
 def main() -> None:
     """Entry point of the ``tagloc`` console script."""
+    if (
+        typer.rich_utils.MAX_WIDTH is None
+        and not sys.stdout.isatty()
+        and "COLUMNS" not in os.environ
+    ):
+        typer.rich_utils.MAX_WIDTH = HELP_WIDTH
+    command = typer.main.get_command(app)
+    unwrap_help(command)
     try:
-        app()
+        command(prog_name="tagloc")
     except TaglocError as exc:
         print(f"tagloc: error: {exc}", file=sys.stderr)
         sys.exit(1)
+
+
+def unwrap_help(command: object) -> None:
+    """Join the lines of the first paragraph of every command's help, recursively.
+
+    Docstrings wrap at 100 columns; rich keeps those line breaks in a group's list of commands,
+    which breaks sentences mid-way at any other width. The first paragraph is one sentence or
+    two, so it is made one line and rich wraps it to the terminal.
+    """
+    help_text = getattr(command, "help", None)
+    if isinstance(help_text, str):
+        first, sep, rest = inspect.cleandoc(help_text).partition("\n\n")
+        command.help = " ".join(first.split()) + sep + rest  # type: ignore[attr-defined]
+    for sub in getattr(command, "commands", {}).values():
+        unwrap_help(sub)

@@ -8,13 +8,27 @@ from typing import Annotated
 import typer
 
 from tagloc.cli import localize_cmd
+from tagloc.cli.detect_cmd import detect
 from tagloc.cli.eval_bag_cmd import eval_bag  # noqa: F401  (registers tagloc eval bag)
 from tagloc.cli.eval_cmd import eval_app
 from tagloc.cli.eval_tags_cmd import eval_tags  # noqa: F401  (registers tagloc eval tags)
 from tagloc.cli.map_cmd import map_app
 from tagloc.cli.options import duration_range, in_range, seed_range
 from tagloc.cli.sim_cmd import sim_app
+from tagloc.cli.tags_cmd import tags_app
 from tagloc.cli.world_cmd import coverage
+
+
+def _version(value: bool) -> None:
+    if value:
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            typer.echo(f"tagloc {version('tagloc')}")
+        except PackageNotFoundError:  # a source tree that was never installed
+            typer.echo("tagloc (not installed: version unknown)")
+        raise typer.Exit()
+
 
 app = typer.Typer(
     name="tagloc",
@@ -32,7 +46,22 @@ app.add_typer(world_app, name="world")
 app.add_typer(map_app, name="map")
 app.add_typer(eval_app, name="eval")
 app.add_typer(sim_app, name="sim")
+app.add_typer(tags_app, name="tags")
 app.command("localize")(localize_cmd.localize)
+app.command("detect")(detect)
+
+
+@app.callback()
+def _root(
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version", help="Print the version and exit.", callback=_version, is_eager=True
+        ),
+    ] = False,
+) -> None:
+    """Fiducial-tag localization for indoor robots whose odometry drifts."""
+
 
 WorldOption = Annotated[
     Path | None,

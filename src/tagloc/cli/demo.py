@@ -193,9 +193,15 @@ def run_demo(
                 built, source=source, lidar=with_premap, premap=survey.premap_map
             )
     # 3. evaluation reports, the picture, the table
+    run_true = _labelled(run_true, "the true tag map", "the true tag map (the world's tags, exact)")
     summaries = {"true map": write_report(run_true, out / "localize_true_map")}
     files += [out / "localize_true_map" / "report.html"]
     if run_built is not None:
+        run_built = _labelled(
+            run_built,
+            "the built tag map",
+            f"the built tag map ({out / 'map' / 'tags.yaml'}, from the survey)",
+        )
         summaries["built map"] = write_report(run_built, out / "localize")
         files += [out / "localize" / "report.html"]
     main = run_built or run_true
@@ -280,3 +286,9 @@ def _table(
     for name, value in rows:
         table.add_row(name, value)
     return table
+
+
+def _labelled(run: LocalizationRun, short: str, long: str) -> LocalizationRun:
+    """The run named for the map it used (the two reports' titles differ), with ``map`` in its
+    metadata (the report's overview lists it)."""
+    return replace(run, name=f"{run.name} against {short}", metadata={**run.metadata, "map": long})

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from tagloc.cli.options import duration_range, in_range, seed_range
+from tagloc.cli.options import SCENARIO_HELP, duration_range, in_range, seed_range
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -33,7 +33,7 @@ eval_app = typer.Typer(
 
 @eval_app.command("run")
 def eval_run(
-    scenario: Annotated[str, typer.Option(help="Simulated scenario (default, kidnap, ...).")],
+    scenario: Annotated[str, typer.Option(help=SCENARIO_HELP)],
     out: Annotated[Path, typer.Option(help="Output directory.")] = Path("out/eval"),
     seed: Annotated[int, typer.Option(help="Scenario seed.", callback=seed_range)] = 0,
     duration: Annotated[

@@ -29,7 +29,7 @@ from tagloc.cli.bag_camera import (
     TagslamOpt,
     TfTopicOpt,
 )
-from tagloc.cli.options import duration_range, in_range, seed_range
+from tagloc.cli.options import SCENARIO_HELP, duration_range, in_range, seed_range
 from tagloc.fileutil import check_outputs
 
 if TYPE_CHECKING:
@@ -66,7 +66,9 @@ def write_stream_bag(
 
 def localize(
     bag: Annotated[Path | None, typer.Argument(help="Input bag / MCAP.")] = None,
-    scenario: Annotated[str | None, typer.Option(help="Simulated scenario instead.")] = None,
+    scenario: Annotated[
+        str | None, typer.Option(help=SCENARIO_HELP + " Instead of a bag.")
+    ] = None,
     tags: Annotated[Path | None, typer.Option(help="Tag map (with a bag).")] = None,
     out: Annotated[Path, typer.Option(help="Output directory.")] = Path("out/localize"),
     config: Annotated[Path | None, typer.Option(help="localizer.yaml.")] = None,
@@ -89,7 +91,14 @@ def localize(
         Path | None,
         typer.Option(help="Point cloud map (.ply/.pcd, map frame) for the lidar fixes."),
     ] = None,
-    no_bag: Annotated[bool, typer.Option("--no-bag", help="No localization.mcap.")] = False,
+    no_bag: Annotated[
+        bool,
+        typer.Option(
+            "--no-bag",
+            help="Do not write localization.mcap (the outputs as a bag for Foxglove or ros2 bag "
+            "play); the text files are written as always. Faster, smaller.",
+        ),
+    ] = False,
     realtime: Annotated[
         bool, typer.Option("--realtime", help="Pace by the wall clock; detect on a worker.")
     ] = False,

@@ -73,7 +73,11 @@ def map_diff(
 ) -> None:
     """Print what changed from OLD to NEW: added, removed, moved tags, changed fields."""
     from tagloc.tags.tagmap import load_tag_map
-    from tagloc.tags.tagmap_diff import diff_tag_maps, format_tag_map_diff
+    from tagloc.tags.tagmap_diff import (
+        diff_tag_maps,
+        format_tag_map_diff,
+        summarize_tag_map_diff,
+    )
 
     diff = diff_tag_maps(
         load_tag_map(old),
@@ -81,7 +85,12 @@ def map_diff(
         min_move_m=min_move_cm / 100.0,
         min_rot_deg=min_rot_deg,
     )
-    typer.echo("\n".join(format_tag_map_diff(diff)) or f"no differences: {old} {new}")
+    lines = format_tag_map_diff(diff)
+    if lines:
+        typer.echo("\n".join(lines))
+        typer.echo(f"{summarize_tag_map_diff(diff)} ({old} -> {new})")
+    else:
+        typer.echo(f"no differences: {old} {new}")
     if exit_code and not diff.is_empty:
         raise typer.Exit(code=1)
 

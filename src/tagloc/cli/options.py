@@ -74,3 +74,12 @@ def _show(value: float) -> str:
 seed_range = in_range(ge=0, le=MAX_SEED)
 duration_range = in_range(gt=0, le=MAX_DURATION_S)
 positive_int = in_range(ge=1)
+
+#: The simulated scenarios, for the help of every ``--scenario`` (``tagloc.sim.scenarios`` is too
+#: heavy to import for ``--help``; a test holds this list to its ``SCENARIOS``).
+SCENARIO_NAMES = (
+    "default", "kidnap", "kidnap_one_tag", "glint", "moved_tag", "corridor", "dropout",
+    "camera_unplugged", "odometry_stall", "clock_jump_back", "duplicated_messages",
+    "glass_corridor", "mirrored_lobby", "crowd", "lidar_unplugged", "long_corridor",
+)  # fmt: skip
+SCENARIO_HELP = "Simulated scenario: " + ", ".join(SCENARIO_NAMES) + "."

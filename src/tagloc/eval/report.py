@@ -177,7 +177,7 @@ def _overview(s: EvalSummary, metadata: dict[str, object]) -> str:
         ["ground truth", s.has_truth],
         ["overall", "PASS" if s.passed else "FAIL"],
     ]
-    for key in ("scenario", "description", "seed", "world"):
+    for key in ("scenario", "description", "seed", "world", "map"):
         if key in metadata:
             facts.append([key, metadata[key]])
     return _table(["", "value"], facts)

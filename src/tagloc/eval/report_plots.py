@@ -46,12 +46,12 @@ def trajectories_png(ev: Evaluation) -> bytes:
     paths = {"truth": traj.T_map_base_truth, **traj.estimates()}
     fig, ax = plt.subplots(figsize=(10, 6.5), dpi=100)
     step = _every(len(traj.stamps_ns))
-    for name in ("odometry", "baseline", "fused", "truth"):
+    for z, name in enumerate(("truth", "odometry", "baseline", "fused")):  # the estimate on top
         T_map_base = paths[name]
         if T_map_base is None:
             continue
         xy = np.asarray(T_map_base.translation)[step, :2]
-        ax.plot(xy[:, 0], xy[:, 1], color=COLORS[name], label=name, linewidth=1.0,
+        ax.plot(xy[:, 0], xy[:, 1], color=COLORS[name], label=name, linewidth=1.0, zorder=2 + z,
                 linestyle="-" if name in ("truth", "fused") else "--")  # fmt: skip
     ax.set_aspect("equal")
     ax.set_xlabel("x in map (m)")

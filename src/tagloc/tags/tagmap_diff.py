@@ -212,6 +212,26 @@ def format_tag_map_diff(diff: TagMapDiff) -> list[str]:
     return lines + [line for *_, line in sorted(keyed)]
 
 
+def summarize_tag_map_diff(diff: TagMapDiff) -> str:
+    """One line counting the changes: ``3 changes: 1 added, 1 removed, 1 moved (1 beyond their
+    uncertainty), 0 changed fields, 0 frames added or removed`` (``no differences`` if none)."""
+    if diff.is_empty:
+        return "no differences"
+    frames = len(diff.frames_added) + len(diff.frames_removed)
+    beyond = sum(bool(m.beyond_uncertainty) for m in diff.moved)
+    total = len(diff.added) + len(diff.removed) + len(diff.moved) + len(diff.changed) + frames
+    moved = f"{len(diff.moved)} moved" + (
+        f" ({beyond} beyond their uncertainty)"
+        if any(m.sigmas is not None for m in diff.moved)
+        else ""
+    )
+    return (
+        f"{total} change{'s' if total != 1 else ''}: {len(diff.added)} added, "
+        f"{len(diff.removed)} removed, {moved}, {len(diff.changed)} changed "
+        f"field{'s' if len(diff.changed) != 1 else ''}, {frames} frame(s) added or removed"
+    )
+
+
 def _uncertainty(move: TagMove) -> str:
     if move.sigmas is None:
         return ""
