@@ -28,7 +28,8 @@ TOOLS_STAMP := $(VENV)/.test-tools
 
 $(TOOLS_STAMP): $(STAMP)
 	@command -v pdftoppm >/dev/null 2>&1 || { command -v apt-get >/dev/null 2>&1 && \
-		{ apt-get install -y -q poppler-utils >/dev/null 2>&1 || \
+		{ { apt-get install -y -q poppler-utils || { apt-get update -q && \
+		    apt-get install -y -q poppler-utils; }; } >/dev/null 2>&1 || \
 		  echo "note: could not install poppler-utils; the tag-sheet tests will skip"; }; } || true
 	@touch $(TOOLS_STAMP)
 
