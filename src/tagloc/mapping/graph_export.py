@@ -43,6 +43,7 @@ from tagloc.mapping.gravity import gravity_residuals, keyframe_tilts_deg
 from tagloc.mapping.initialize import inverse_h
 from tagloc.mapping.odometry_factors import log_batch
 from tagloc.mapping.scan_factors import RelativePoseFactors
+from tagloc.mapping.whitening import AxisWhitening
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -71,7 +72,8 @@ class GraphAtSolution:
         Raw odometry steps.
     c : (4,) float
         Odometry calibration vector.
-    odometry_sigmas : (K-1, 6) float
+    odometry_noise : AxisWhitening
+        The odometry steps' noise (:mod:`tagloc.mapping.odometry_noise`).
     held : mapping of int to (4, 4) float
     held_sigmas : mapping of int to (6,) float
     up_base : (K, 3) float or None
@@ -95,7 +97,7 @@ class GraphAtSolution:
     outlier_sigma: float
     step_raw: FloatArray
     c: FloatArray
-    odometry_sigmas: FloatArray
+    odometry_noise: AxisWhitening
     held: Mapping[int, FloatArray]
     held_sigmas: Mapping[int, FloatArray]
     up_base: FloatArray | None
@@ -131,7 +133,7 @@ def factor_records(g: GraphAtSolution) -> list[dict[str, Any]]:
         Z = corrected_steps(g.step_raw, calibration_from_vector(g.c))
         B = inverse_h(g.M_map_base[:-1]) @ g.M_map_base[1:]
         e = log_batch(inverse_h(Z) @ B)
-        w = np.linalg.norm(e / g.odometry_sigmas, axis=1)
+        w = np.linalg.norm(g.odometry_noise.whiten(e), axis=1)
         for k in range(1, len(g.M_map_base)):
             r = e[k - 1]
             records.append({

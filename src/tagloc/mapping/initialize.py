@@ -86,8 +86,8 @@ def initialize_keyframes(
         if known:
             i = min(known, key=lambda i: obs.range_m[i])
             M_tag = M_map_tag[int(obs.tag[i])]
-            if pred is None:
-                meas = M_tag @ inverse_h(obs.T_base_tag[i, 0])
+            if pred is None:  # the first fix: the branch the next sightings agree with
+                meas = _first_fix(obs, M_odom_base, order, bounds, M_map_tag, k, i)
             else:  # position from the tag; yaw from the track between fixes (tilts may be wrong)
                 meas = pred.copy()
                 meas[:3, 3] = M_tag[:3, 3] - pred[:3, :3] @ obs.T_base_tag[i, 0, :3, 3]
@@ -120,6 +120,46 @@ def initialize_keyframes(
     k0 = int(placed[0])
     M_map_base[:k0] = (M_map_base[k0] @ inverse_h(M_odom_base[k0])) @ M_odom_base[:k0]
     return M_map_base
+
+
+#: The first fix's rotation is the consensus of this many sightings of placed tags.
+FIRST_FIX_SIGHTINGS = 12
+
+
+def _first_fix(
+    obs: Observations,
+    M_odom_base: FloatArray,
+    order: IntArray,
+    bounds: IntArray,
+    M_map_tag: Mapping[int, FloatArray],
+    k0: int,
+    i0: int,
+) -> FloatArray:
+    """``T_map_base`` at keyframe ``k0`` from sighting ``i0``, its IPPE branch chosen by the
+    next sightings of placed tags.
+
+    The whole start of the map hangs on the first fix: one face-on view whose wrong branch
+    happened to reproject better (ambiguity 0.2 at 4 m in a simulated drive) turned every
+    keyframe by 143 deg, and later fixes, disagreeing with that, were refused as glints. Each
+    sighting's two branches imply two ``R_map_odom``; the wrong one scatters with the viewpoint
+    while the right one repeats (:func:`consensus_rotation`), and odometry over a second of
+    driving does not drift enough to matter.
+    """
+    R_both, k = [], k0
+    while k < len(M_odom_base) and len(R_both) < FIRST_FIX_SIGHTINGS:
+        for i in order[bounds[k] : bounds[k + 1]]:
+            j = int(obs.tag[i])
+            if j in M_map_tag:
+                R_map_base = M_map_tag[j][:3, :3] @ np.swapaxes(obs.T_base_tag[i, :, :3, :3], 1, 2)
+                R_both.append(R_map_base @ M_odom_base[k, :3, :3].T)
+        k += 1
+    best = consensus_rotation(np.asarray(R_both))
+    R_map_base_0 = M_map_tag[int(obs.tag[i0])][:3, :3] @ np.swapaxes(
+        obs.T_base_tag[i0, :, :3, :3], 1, 2
+    )
+    angle = rotation_angle(R_map_base_0 @ M_odom_base[k0, :3, :3].T, best[None])
+    branch = int(np.argmin(angle))
+    return np.asarray(M_map_tag[int(obs.tag[i0])] @ inverse_h(obs.T_base_tag[i0, branch]))
 
 
 def _yaw_fix(origin: FloatArray, predicted: FloatArray, fixed: FloatArray) -> FloatArray:

@@ -43,7 +43,7 @@ from tagloc.mapping.corner_graph import (
     linearize_corners,
 )
 from tagloc.mapping.flips import flip_stuck_tags
-from tagloc.mapping.graph import GraphSolution, L, X, odometry_sigmas
+from tagloc.mapping.graph import GraphSolution, L, X
 from tagloc.mapping.gravity import gravity_jacobians, gravity_residuals
 from tagloc.mapping.gtsam_bridge import solver_errors
 from tagloc.mapping.initialize import inverse_h, rotation_angle
@@ -53,6 +53,7 @@ from tagloc.mapping.odometry_factors import (
     odometry_residuals,
     prior_residuals,
 )
+from tagloc.mapping.odometry_noise import odometry_whitening
 from tagloc.mapping.scan_factors import RelativePoseFactors, linearize_relative, relative_cost
 
 logger = logging.getLogger(__name__)
@@ -70,10 +71,12 @@ MAX_FLIP_PASSES = 2
 class Priors:
     """Priors besides the corners and the odometry: each held tag's sigmas ``(6,)`` (m, rad;
     missing: the configuration's defaults), gravity "up" ``(K, 3)`` in each keyframe's base
-    (None: no gravity priors, :mod:`tagloc.mapping.gravity`)."""
+    (None: no gravity priors, :mod:`tagloc.mapping.gravity`), and "up" ``(K, 3)`` for the
+    odometry noise (None: an upright base, :mod:`tagloc.mapping.odometry_noise`)."""
 
     anchor_sigmas: Mapping[int, FloatArray] = field(default_factory=dict)
     up_base: FloatArray | None = None
+    odometry_up: FloatArray | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -105,7 +108,7 @@ class _Problem:
         self.calibrate = config.joint_calibration
         self.cameras, self.T_base_cam = cameras, T_base_cam
         self.step_raw = inverse_h(M_odom_raw[:-1]) @ M_odom_raw[1:]
-        self.sigmas = odometry_sigmas(M_odom_raw, config.odometry)
+        self.noise = odometry_whitening(M_odom_raw, config.odometry, priors.odometry_up)
         default = np.array([config.anchor_sigma_m] * 3 + [config.anchor_sigma_rad] * 3)
         self.held_sigmas = {j: np.asarray(priors.anchor_sigmas.get(j, default)) for j in held}
         self.up_base = priors.up_base
@@ -136,7 +139,7 @@ class _Problem:
         """The robust cost (corners capped, Huber or Gaussian odometry, priors)."""
         r, _, _ = self.corners(state)
         total = float(np.sum(corner_cost(r, self.kind, self.k)))
-        e = odometry_residuals(state.M_map_base, self.step_raw, state.c, self.sigmas)
+        e = odometry_residuals(state.M_map_base, self.step_raw, state.c, self.noise)
         s = np.sum(e**2, axis=1)
         k = self.config.odometry_robust_k
         total += float(np.sum(0.5 * s if k is None else kernel_cost(s, "huber", k)))
@@ -164,7 +167,7 @@ class _Problem:
                 X(int(obs.keyframe[m])), A_base[m], L(int(obs.tag[m])), A_tag[m], b[m], unit8
             ))  # fmt: skip
         e, A_prev, A_next, A_c = linearize_odometry(
-            state.M_map_base, self.step_raw, state.c, self.sigmas, self.calibrate
+            state.M_map_base, self.step_raw, state.c, self.noise, self.calibrate
         )
         sqrt_w = np.sqrt(self._odometry_weights(e))[:, None]
         e, A_prev, A_next = e * sqrt_w, A_prev * sqrt_w[..., None], A_next * sqrt_w[..., None]
