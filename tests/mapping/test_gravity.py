@@ -166,13 +166,49 @@ def dupont(tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no-untyped
     return survey, rig.anchors, config
 
 
-def test_dupont_map_is_level_against_the_vio_gravity(dupont) -> None:  # type: ignore[no-untyped-def]
+@pytest.fixture(scope="module")
+def dupont_map(dupont):  # type: ignore[no-untyped-def]
     survey, anchors, config = dupont
+    return build_tag_map(survey, anchors, config)
+
+
+def test_dupont_map_is_level_against_the_vio_gravity(dupont, dupont_map) -> None:  # type: ignore[no-untyped-def]
+    _, _, config = dupont
     assert config.odometry_frame.gravity_aligned
-    tag_map, level = build_tag_map(survey, anchors, config)
+    tag_map, level = dupont_map
     assert level.tilt_deg <= 0.2  # measured 0.00 deg
     assert len(tag_map) == 20
     assert all(v < 0.55 for v in level.reproj_rms_px_per_camera.values())
+
+
+def _rigid_fit(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rotation ``R`` and residuals of the least-squares fit of points ``a`` onto ``b`` (Kabsch)."""
+    ca, cb = a.mean(axis=0), b.mean(axis=0)
+    U, _, Vt = np.linalg.svd((a - ca).T @ (b - cb))
+    R = Vt.T @ np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))]) @ U.T
+    return R, np.linalg.norm((a - ca) @ R.T + cb - b, axis=1)
+
+
+def test_dupont_map_heading_agrees_with_a_peers_map(dupont_map) -> None:  # type: ignore[no-untyped-def]
+    """TagSLAM's own map of this drive (tagslam_map.yaml, a peer's answer, not the truth):
+    after the best rigid fit, the turn about the vertical is the whole map's heading error,
+    which the left/right agreement cannot see. Measured: turn -0.10 deg, shape 2.6 cm RMS
+    (the fit's tilt, 1.35 deg, is the peer's frame, defined by tag 6 as measured, against the
+    VIO's gravity); before the odometry noise followed the rig's true vertical, -3.6 deg."""
+    import yaml
+
+    path = DUPONT / "tagslam_map.yaml"
+    if not path.is_file():
+        pytest.skip(f"TagSLAM's map of the dupont drive not found at {path.resolve()}")
+    peer = {t["id"]: np.array(t["position"]) for t in yaml.safe_load(path.read_text())["tags"]}
+    tag_map, _ = dupont_map
+    ids = sorted(set(peer) & set(tag_map.ids()))
+    ours = np.array([tag_map.T_frame_tag(i).translation for i in ids])
+    R, residual = _rigid_fit(ours, np.array([peer[i] for i in ids]))
+    turn_deg = float(np.degrees(np.arctan2(R[1, 0], R[0, 0])))
+    assert len(ids) == 20
+    assert abs(turn_deg) <= 0.5, f"the map is turned {turn_deg:.2f} deg against TagSLAM's"
+    assert float(np.sqrt(np.mean(residual**2))) <= 0.07
 
 
 @pytest.mark.slow

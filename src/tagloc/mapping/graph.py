@@ -30,9 +30,10 @@ import numpy as np
 import numpy.typing as npt
 
 from tagloc.geometry import SE3
+from tagloc.mapping.anchors import anchor_default_sigmas, anchor_whitening
 from tagloc.mapping.config import MapBuildConfig
 from tagloc.mapping.gravity import add_gravity_factors
-from tagloc.mapping.gtsam_bridge import PERM, cov_from_gtsam, diagonal_sigmas, solver_errors
+from tagloc.mapping.gtsam_bridge import PERM, cov_from_gtsam, solver_errors
 from tagloc.mapping.initialize import inverse_h
 from tagloc.mapping.odometry_noise import odometry_whitening
 from tagloc.mapping.scan_factors import RelativePoseFactors, add_relative_factors
@@ -169,10 +170,11 @@ def add_odometry_and_anchors(
         if odo_kernel is not None:
             model = gtsam.noiseModel.Robust.Create(odo_kernel, model)
         graph.add(gtsam.BetweenFactorPose3(X(k), X(k + 1), _pose3(M), model))
-    default = [config.anchor_sigma_m] * 3 + [config.anchor_sigma_rad] * 3
+    default = anchor_default_sigmas(config)
     for j, M in held_tags(data.M_map_anchor, data.tag, data.M_map_tag_init).items():
-        sigmas = data.anchor_sigmas.get(j, default)
-        graph.add(gtsam.PriorFactorPose3(L(j), _pose3(M), diagonal_sigmas(sigmas)))
+        level = None if data.up_base is None else M  # gravity priors: the tilt is theirs
+        noise = anchor_whitening(data.anchor_sigmas.get(j, default), level)
+        graph.add(gtsam.PriorFactorPose3(L(j), _pose3(M), noise.gtsam_model(0)))
     if data.up_base is not None:  # gravity priors (mapping.gravity)
         keys = [X(k) for k in range(len(data.up_base))]
         add_gravity_factors(graph, keys, data.up_base, np.radians(config.gravity.sigma_deg))

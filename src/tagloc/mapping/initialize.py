@@ -135,31 +135,36 @@ def _first_fix(
     k0: int,
     i0: int,
 ) -> FloatArray:
-    """``T_map_base`` at keyframe ``k0`` from sighting ``i0``, its IPPE branch chosen by the
-    next sightings of placed tags.
+    """``T_map_base`` at keyframe ``k0`` from sighting ``i0``, on the IPPE branch the next
+    sightings' preferred branches agree with.
 
     The whole start of the map hangs on the first fix: one face-on view whose wrong branch
     happened to reproject better (ambiguity 0.2 at 4 m in a simulated drive) turned every
     keyframe by 143 deg, and later fixes, disagreeing with that, were refused as glints. Each
-    sighting's two branches imply two ``R_map_odom``; the wrong one scatters with the viewpoint
-    while the right one repeats (:func:`consensus_rotation`), and odometry over a second of
-    driving does not drift enough to matter.
+    of the next sightings of placed tags implies an ``R_map_odom`` on its better-reprojecting
+    branch (odometry over a second of driving does not drift enough to matter); the branch of
+    ``i0`` that more of them agree with (within :data:`CONSENSUS_ANGLE_RAD`) wins, and a tie
+    keeps ``i0``'s own better branch.
     """
-    R_both, k = [], k0
-    while k < len(M_odom_base) and len(R_both) < FIRST_FIX_SIGHTINGS:
+    preferred: list[FloatArray] = []
+    k = k0
+    while k < len(M_odom_base) and len(preferred) < FIRST_FIX_SIGHTINGS:
         for i in order[bounds[k] : bounds[k + 1]]:
             j = int(obs.tag[i])
-            if j in M_map_tag:
-                R_map_base = M_map_tag[j][:3, :3] @ np.swapaxes(obs.T_base_tag[i, :, :3, :3], 1, 2)
-                R_both.append(R_map_base @ M_odom_base[k, :3, :3].T)
+            if j in M_map_tag and i != i0:
+                R_map_base = M_map_tag[j][:3, :3] @ obs.T_base_tag[i, 0, :3, :3].T
+                preferred.append(R_map_base @ M_odom_base[k, :3, :3].T)
         k += 1
-    best = consensus_rotation(np.asarray(R_both))
-    R_map_base_0 = M_map_tag[int(obs.tag[i0])][:3, :3] @ np.swapaxes(
-        obs.T_base_tag[i0, :, :3, :3], 1, 2
-    )
-    angle = rotation_angle(R_map_base_0 @ M_odom_base[k0, :3, :3].T, best[None])
-    branch = int(np.argmin(angle))
-    return np.asarray(M_map_tag[int(obs.tag[i0])] @ inverse_h(obs.T_base_tag[i0, branch]))
+    M_tag = M_map_tag[int(obs.tag[i0])]
+    R_map_odom = (
+        M_tag[:3, :3] @ np.swapaxes(obs.T_base_tag[i0, :, :3, :3], 1, 2) @ M_odom_base[k0, :3, :3].T
+    )  # (2, 3, 3): both branches of i0
+    branch = 0
+    if preferred:
+        angle = rotation_angle(R_map_odom[:, None], np.asarray(preferred)[None])  # (2, n)
+        support = (angle < CONSENSUS_ANGLE_RAD).sum(axis=1)
+        branch = int(support[1] > support[0])
+    return np.asarray(M_tag @ inverse_h(obs.T_base_tag[i0, branch]))
 
 
 def _yaw_fix(origin: FloatArray, predicted: FloatArray, fixed: FloatArray) -> FloatArray:

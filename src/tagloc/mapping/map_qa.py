@@ -15,7 +15,6 @@ import numpy as np
 
 from tagloc.geometry import SE3
 from tagloc.mapping.advice import coverage_gaps, uncertainty_advice
-from tagloc.mapping.anchors import anchor_default_sigmas
 from tagloc.mapping.config import MapBuildConfig
 from tagloc.mapping.exclude import survey_start_ns
 from tagloc.mapping.graph import GraphSolution
@@ -57,7 +56,7 @@ def graph_records(
         ),
         solution.mahalanobis, config.outlier_sigma, inverse_h(M_odom_raw[:-1]) @ M_odom_raw[1:],
         c, odometry_whitening(M_odom_raw, config.odometry, priors.odometry_up), held,
-        {j: priors.anchor_sigmas.get(j, anchor_default_sigmas(config)) for j in held},
+        priors.held_whitening(held, config),
         priors.up_base, float(np.radians(config.gravity.sigma_deg)), relative,
     )  # fmt: skip
     return tuple(factor_records(at_solution))

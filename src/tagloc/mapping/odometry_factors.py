@@ -127,6 +127,7 @@ def linearize_odometry(
     return noise.whiten(e), A_prev, A_next, A_c
 
 
-def prior_residuals(M: FloatArray, M_prior: FloatArray, sigmas: FloatArray) -> FloatArray:
-    """``(n, 6)`` whitened ``Log(M_prior^-1 M) / sigmas`` of pose priors (Jacobian ``1/sigma``)."""
-    return log_batch(inverse_h(M_prior) @ M) / sigmas
+def prior_residuals(M: FloatArray, M_prior: FloatArray, noise: AxisWhitening) -> FloatArray:
+    """``(n, 6)`` whitened ``Log(M_prior^-1 M)`` of pose priors (Jacobian: the whitening of the
+    identity)."""
+    return noise.whiten(log_batch(inverse_h(M_prior) @ M))

@@ -32,6 +32,7 @@ import numpy.typing as npt
 
 from tagloc.camera import CameraModel
 from tagloc.geometry import SE3
+from tagloc.mapping.anchors import anchor_default_sigmas, anchor_whitening
 from tagloc.mapping.calibration import N_CALIBRATION
 from tagloc.mapping.config import MapBuildConfig
 from tagloc.mapping.corner_graph import (
@@ -55,6 +56,7 @@ from tagloc.mapping.odometry_factors import (
 )
 from tagloc.mapping.odometry_noise import odometry_whitening
 from tagloc.mapping.scan_factors import RelativePoseFactors, linearize_relative, relative_cost
+from tagloc.mapping.whitening import AxisWhitening
 
 logger = logging.getLogger(__name__)
 FloatArray = npt.NDArray[np.float64]
@@ -77,6 +79,19 @@ class Priors:
     anchor_sigmas: Mapping[int, FloatArray] = field(default_factory=dict)
     up_base: FloatArray | None = None
     odometry_up: FloatArray | None = None
+
+    def held_whitening(
+        self, held: Mapping[int, FloatArray], config: MapBuildConfig
+    ) -> dict[int, AxisWhitening]:
+        """Each held tag's prior (:func:`~tagloc.mapping.anchors.anchor_whitening`): along
+        ``map``'s axes with the tilt free when gravity priors level the map."""
+        default = anchor_default_sigmas(config)
+        return {
+            j: anchor_whitening(
+                self.anchor_sigmas.get(j, default), None if self.up_base is None else M
+            )
+            for j, M in held.items()
+        }
 
 
 @dataclass(frozen=True, slots=True)
@@ -109,8 +124,7 @@ class _Problem:
         self.cameras, self.T_base_cam = cameras, T_base_cam
         self.step_raw = inverse_h(M_odom_raw[:-1]) @ M_odom_raw[1:]
         self.noise = odometry_whitening(M_odom_raw, config.odometry, priors.odometry_up)
-        default = np.array([config.anchor_sigma_m] * 3 + [config.anchor_sigma_rad] * 3)
-        self.held_sigmas = {j: np.asarray(priors.anchor_sigmas.get(j, default)) for j in held}
+        self.held_noise = priors.held_whitening(self.held, config)
         self.up_base = priors.up_base
         self.gravity_sigma = float(np.radians(config.gravity.sigma_deg))
         self.kind, self.k = config.robust, config.robust_k
@@ -145,7 +159,7 @@ class _Problem:
         total += float(np.sum(0.5 * s if k is None else kernel_cost(s, "huber", k)))
         for j, M in self.held.items():
             total += 0.5 * float(
-                np.sum(prior_residuals(state.M_map_tag[j][None], M[None], self.held_sigmas[j]) ** 2)
+                np.sum(prior_residuals(state.M_map_tag[j][None], M[None], self.held_noise[j]) ** 2)
             )
         if self.up_base is not None:
             g = gravity_residuals(state.M_map_base, self.up_base, self.gravity_sigma)
@@ -180,9 +194,10 @@ class _Problem:
                     -e[k], unit6,
                 ))  # fmt: skip
         for j, M in self.held.items():
-            sigmas = self.held_sigmas[j]
-            e_held = prior_residuals(state.M_map_tag[j][None], M[None], sigmas)[0]
-            graph.add(gtsam.JacobianFactor(L(j), np.diag(1.0 / sigmas), -e_held, unit6))
+            noise = self.held_noise[j]
+            e_held = prior_residuals(state.M_map_tag[j][None], M[None], noise)[0]
+            W = noise.whiten_jacobian(np.eye(6)[None])[0]
+            graph.add(gtsam.JacobianFactor(L(j), W, -e_held, unit6))
         if self.up_base is not None:  # gravity priors (mapping.gravity)
             g = gravity_residuals(state.M_map_base, self.up_base, self.gravity_sigma)
             A_g = gravity_jacobians(state.M_map_base, self.gravity_sigma)
