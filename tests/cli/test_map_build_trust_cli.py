@@ -84,7 +84,7 @@ def test_bad_options_fail_in_one_line(tmp_path: Path, args: tuple[str, ...], mes
 
 def test_bad_config_names_the_field(tmp_path: Path) -> None:
     config, out = tmp_path / "build.yaml", tmp_path / "tags.yaml"
-    config.write_text("gravity: {aligned_odometry: true, sigma_deg: -1}\n")
+    config.write_text("gravity: {priors: true, sigma_deg: -1}\n")
     result = run_tagloc(
         "map", "build", "--sim", "--world", str(_short_world(tmp_path)), "--camera-stride", "9",
         "--out", str(out), "--config", str(config),

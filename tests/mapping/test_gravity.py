@@ -18,16 +18,15 @@ import numpy as np
 import pytest
 
 from tagloc.config import parse_yaml_mapping
+from tagloc.frames import OdometryFrameConfig
 from tagloc.geometry import SE3, SO3
 from tagloc.mapping import MapBuildConfig, build_tag_map
 from tagloc.mapping.anchors import Anchor
-from tagloc.mapping.config import GravityConfig
 from tagloc.mapping.gravity import (
     gravity_jacobians,
     gravity_residuals,
     keyframe_tilts_deg,
     map_tilt_deg,
-    up_in_base,
 )
 from tagloc.sim import ObservationConfig, World, load_default_world, simulate_drive
 from tagloc.sim.survey import sim_build_config, survey_from_drive
@@ -36,6 +35,10 @@ from tagloc.tags.tagmap import TagMap
 REPO = Path(__file__).resolve().parents[2]
 DUPONT = REPO / ".." / "shared" / "data" / "dupont"
 DUPONT_CONFIG = REPO / "docs" / "dupont_map.yaml"
+
+
+def _up_in_base(M_odom_base: np.ndarray) -> np.ndarray:
+    return OdometryFrameConfig(gravity_aligned=True).up_in_base(M_odom_base[:, :3, :3])
 
 
 def _random_poses(rng: np.random.Generator, n: int) -> np.ndarray:
@@ -48,7 +51,7 @@ def test_direction_error_matches_gtsam_attitude_factor() -> None:
     M_odom_base = (
         M_map_base @ SE3.from_rotvec(rng.normal(0, 0.05, (20, 3)), np.zeros((20, 3))).as_matrix()
     )
-    up = up_in_base(M_odom_base)
+    up = _up_in_base(M_odom_base)
     ours = keyframe_tilts_deg(M_map_base, up)
     e = np.linalg.norm(gravity_residuals(M_map_base, up, 1.0), axis=1)
     for k in range(20):
@@ -67,7 +70,7 @@ def test_direction_error_matches_gtsam_attitude_factor() -> None:
 def test_jacobians_match_central_differences() -> None:
     rng = np.random.default_rng(4)
     M = _random_poses(rng, 5)
-    up = up_in_base(_random_poses(rng, 5))
+    up = _up_in_base(_random_poses(rng, 5))
     J = gravity_jacobians(M, 0.01)
     h = 1e-6
     for k in range(5):
@@ -116,7 +119,7 @@ def test_gravity_levels_a_map_whose_anchor_is_tilted() -> None:
     T_tilted = SE3(T_tilted.rotation, T_true.translation)
     anchors = {first: Anchor(T_tilted, 0.001, 5.0)}
     base = sim_build_config(drive, observation)
-    level = base.model_copy(update={"gravity": GravityConfig(aligned_odometry=True)})
+    level = base.model_copy(update={"odometry_frame": OdometryFrameConfig(gravity_aligned=True)})
     map_plain, report_plain = build_tag_map(survey, anchors, base)
     map_level, report_level = build_tag_map(survey, anchors, level)
     assert _true_tilt_deg(map_plain, world) == pytest.approx(2.0, abs=0.3)
@@ -130,7 +133,8 @@ def test_map_tilt_of_a_rotated_trajectory() -> None:
     rng = np.random.default_rng(5)
     M_odom_base = _random_poses(rng, 30)
     tilt = SE3(SO3.from_rotvec([0.0, np.radians(1.5), 0.0]), np.zeros(3)).as_matrix()
-    assert map_tilt_deg(tilt @ M_odom_base, up_in_base(M_odom_base)) == pytest.approx(1.5, abs=1e-6)
+    up = _up_in_base(M_odom_base)
+    assert map_tilt_deg(tilt @ M_odom_base, up) == pytest.approx(1.5, abs=1e-6)
 
 
 # ----- dupont --------------------------------------------------------------------------------
@@ -162,13 +166,49 @@ def dupont(tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no-untyped
     return survey, rig.anchors, config
 
 
-def test_dupont_map_is_level_against_the_vio_gravity(dupont) -> None:  # type: ignore[no-untyped-def]
+@pytest.fixture(scope="module")
+def dupont_map(dupont):  # type: ignore[no-untyped-def]
     survey, anchors, config = dupont
-    assert config.gravity.aligned_odometry
-    tag_map, level = build_tag_map(survey, anchors, config)
+    return build_tag_map(survey, anchors, config)
+
+
+def test_dupont_map_is_level_against_the_vio_gravity(dupont, dupont_map) -> None:  # type: ignore[no-untyped-def]
+    _, _, config = dupont
+    assert config.odometry_frame.gravity_aligned
+    tag_map, level = dupont_map
     assert level.tilt_deg <= 0.2  # measured 0.00 deg
     assert len(tag_map) == 20
     assert all(v < 0.55 for v in level.reproj_rms_px_per_camera.values())
+
+
+def _rigid_fit(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rotation ``R`` and residuals of the least-squares fit of points ``a`` onto ``b`` (Kabsch)."""
+    ca, cb = a.mean(axis=0), b.mean(axis=0)
+    U, _, Vt = np.linalg.svd((a - ca).T @ (b - cb))
+    R = Vt.T @ np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))]) @ U.T
+    return R, np.linalg.norm((a - ca) @ R.T + cb - b, axis=1)
+
+
+def test_dupont_map_heading_agrees_with_a_peers_map(dupont_map) -> None:  # type: ignore[no-untyped-def]
+    """TagSLAM's own map of this drive (tagslam_map.yaml, a peer's answer, not the truth):
+    after the best rigid fit, the turn about the vertical is the whole map's heading error,
+    which the left/right agreement cannot see. Measured: turn -0.10 deg, shape 2.6 cm RMS
+    (the fit's tilt, 1.35 deg, is the peer's frame, defined by tag 6 as measured, against the
+    VIO's gravity); before the odometry noise followed the rig's true vertical, -3.6 deg."""
+    import yaml
+
+    path = DUPONT / "tagslam_map.yaml"
+    if not path.is_file():
+        pytest.skip(f"TagSLAM's map of the dupont drive not found at {path.resolve()}")
+    peer = {t["id"]: np.array(t["position"]) for t in yaml.safe_load(path.read_text())["tags"]}
+    tag_map, _ = dupont_map
+    ids = sorted(set(peer) & set(tag_map.ids()))
+    ours = np.array([tag_map.T_frame_tag(i).translation for i in ids])
+    R, residual = _rigid_fit(ours, np.array([peer[i] for i in ids]))
+    turn_deg = float(np.degrees(np.arctan2(R[1, 0], R[0, 0])))
+    assert len(ids) == 20
+    assert abs(turn_deg) <= 0.5, f"the map is turned {turn_deg:.2f} deg against TagSLAM's"
+    assert float(np.sqrt(np.mean(residual**2))) <= 0.07
 
 
 @pytest.mark.slow

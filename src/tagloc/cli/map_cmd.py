@@ -224,7 +224,7 @@ def map_build(
     if calibrate_odometry is not None:
         rounds["calibration_rounds"] = calibrate_odometry
     if gravity is not None:
-        rounds["gravity"] = {"aligned_odometry": gravity}
+        rounds["odometry_frame"] = {"gravity_aligned": gravity}
     if uncertain_cm is not None:
         rounds["uncertainty_flag_m"] = uncertain_cm / 100.0
     with Progress(transient=True) as bar:

@@ -49,5 +49,14 @@ Errors are the :mod:`tagloc.errors` classes plus :class:`~tagloc.frames.errors.S
 
 from tagloc.frames.buffer import DEFAULT_WINDOW_NS, TransformBuffer
 from tagloc.frames.errors import StaleSampleError, StampError
+from tagloc.frames.odometry_frame import OdometryFrameConfig, axis_vector, base_tilt_deg
 
-__all__ = ["DEFAULT_WINDOW_NS", "StaleSampleError", "StampError", "TransformBuffer"]
+__all__ = [
+    "DEFAULT_WINDOW_NS",
+    "OdometryFrameConfig",
+    "StaleSampleError",
+    "StampError",
+    "TransformBuffer",
+    "axis_vector",
+    "base_tilt_deg",
+]

@@ -16,6 +16,7 @@ import numpy.typing as npt
 
 from tagloc.geometry import SE3
 from tagloc.mapping.config import MapBuildConfig
+from tagloc.mapping.whitening import AxisWhitening
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -59,3 +60,31 @@ def anchor_default_sigmas(config: MapBuildConfig) -> FloatArray:
 def as_anchor(value: SE3 | Anchor) -> Anchor:
     """``value`` as an :class:`Anchor` (a bare pose: default sigmas)."""
     return value if isinstance(value, Anchor) else Anchor(value)
+
+
+#: Standard deviation (rad) of a held tag's tilt when gravity priors level the map: its
+#: measured roll and pitch give way to thousands of keyframes' gravity; its heading does not.
+LEVEL_ANCHOR_TILT_RAD = 0.1
+
+
+def anchor_whitening(
+    sigmas: FloatArray, M_map_tag: FloatArray | None = None
+) -> AxisWhitening:
+    """The prior of a held tag: ``sigmas (6,)`` along the tag's axes, or with ``M_map_tag``
+    given (gravity priors on), along ``map``'s axes with the tilt free.
+
+    An anchor's orientation measured with a level that disagrees with gravity by a degree (or a
+    peer's frame that is not level) otherwise fights the gravity priors, and the compromise
+    turns the whole map about the vertical: a real one-anchor drive came out 1.0 deg turned
+    with its anchor held exactly, 0.1 deg with the anchor's tilt left to gravity. The
+    rotation error ``Log(T_prior^-1 T)`` lives in the tag's tangent; ``R_map_tag`` takes it
+    into ``map``, where rotations about x and y get :data:`LEVEL_ANCHOR_TILT_RAD` and the
+    rotation about z (heading) keeps the anchor's own sigma.
+    """
+    s = np.asarray(sigmas, dtype=np.float64)
+    if M_map_tag is None:
+        return AxisWhitening(s[None])
+    level = s.copy()
+    level[3:5] = max(LEVEL_ANCHOR_TILT_RAD, float(s[3:5].max()))
+    return AxisWhitening(level[None], np.asarray(M_map_tag, dtype=np.float64)[None, :3, :3])
+

@@ -47,6 +47,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from tagloc.frames import base_tilt_deg
 from tagloc.geometry import SE3
 from tagloc.mapping.anchors import Anchor, as_anchor
 from tagloc.mapping.calibration import (
@@ -65,7 +66,7 @@ from tagloc.mapping.graph import (
     marginal_covariances,
     solve_graph,
 )
-from tagloc.mapping.gravity import map_tilt_deg, up_in_base
+from tagloc.mapping.gravity import map_tilt_deg
 from tagloc.mapping.gtsam_bridge import SolverError
 from tagloc.mapping.initialize import (
     choose_branches,
@@ -130,6 +131,7 @@ def _graph_input(
         M_map_tag_init=M_map_tag,
         anchor_sigmas=priors.anchor_sigmas,
         up_base=priors.up_base,
+        odometry_up=priors.odometry_up,
         relative=relative,
     )
 
@@ -191,8 +193,11 @@ def build_tag_map(
     # 2. initial values
     t = time.perf_counter()
     M_anchor, anchor_sigmas = _anchor_indices(anchors, obs, survey.source, config)
-    up_base = up_in_base(obs.T_odom_base.as_matrix().reshape(-1, 4, 4))
-    priors = Priors(anchor_sigmas, up_base if config.gravity.aligned_odometry else None)
+    R_odom_base = obs.T_odom_base.as_matrix().reshape(-1, 4, 4)[:, :3, :3]
+    odometry_up = config.odometry_frame.up_in_base(R_odom_base)
+    gravity = config.odometry_frame.gravity_aligned and config.gravity.priors
+    priors = Priors(anchor_sigmas, odometry_up if gravity else None, odometry_up)
+    _check_odometry_frame(R_odom_base, odometry_up, config, survey.source)
     M_map_base = initialize_keyframes(obs_init, M_anchor, config.max_ambiguity_for_init)
     M_map_tag = initialize_tags(obs, M_map_base, M_anchor)
     branch = choose_branches(obs, M_map_base, M_map_tag)
@@ -289,7 +294,9 @@ def build_tag_map(
     tag_map, report = map_and_report(
         survey, obs, solution, set(M_anchor), M_map_base_odometry, config, set(ambiguous)
     )
-    object.__setattr__(report, "tilt_deg", map_tilt_deg(solution.M_map_base, up_base))
+    odometry_z = config.odometry_frame.model_copy(update={"gravity_aligned": True})
+    up_odom = odometry_z.up_in_base(R_odom_base)  # the odometry frame's up, in each base
+    object.__setattr__(report, "tilt_deg", map_tilt_deg(solution.M_map_base, up_odom))
     factors = graph_records(
         survey, obs, solution, M_odom_raw, state.c, held, priors, config, relative
     )
@@ -308,3 +315,27 @@ def _odometry_in_map(obs: Observations, M_map_base_init: np.ndarray) -> np.ndarr
     """Keyframe odometry, aligned to ``map`` at the first keyframe (the 'before' trajectory)."""
     M_odom_base = obs.T_odom_base.as_matrix().reshape(-1, 4, 4)
     return np.asarray((M_map_base_init[0] @ inverse_h(M_odom_base[0])) @ M_odom_base)
+
+
+#: Median angle (deg) between the body's configured "up" and the odometry frame's z above which
+#: the odometry frame's configuration is probably wrong (a camera frame taken for an upright
+#: base: about 90).
+BASE_TILT_WARN_DEG = 30.0
+
+
+def _check_odometry_frame(
+    R_odom_base: np.ndarray, odometry_up: np.ndarray, config: MapBuildConfig, source: str
+) -> None:
+    """Warn (once, in the log) when the body's "up" is far from the odometry frame's z."""
+    if config.odometry_frame.gravity_aligned:
+        return
+    tilt = base_tilt_deg(R_odom_base, odometry_up)
+    if tilt > BASE_TILT_WARN_DEG:
+        logger.warning(
+            "%s: the body's up axis (%s) is %.0f deg from the odometry frame's z (median over "
+            "keyframes): the odometry noise is split about the wrong vertical; if the odometry "
+            "is gravity-aligned (VIO) set odometry_frame.gravity_aligned, otherwise "
+            "odometry_frame.base_up_axis",
+            source, config.odometry_frame.base_up_axis, tilt,
+        )  # fmt: skip
+

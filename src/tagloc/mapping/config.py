@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from tagloc.frames import OdometryFrameConfig
 from tagloc.mapping.lidar_config import LidarSurveyConfig
 from tagloc.tags.covariance import NoiseModel
 
@@ -42,13 +43,15 @@ class OdometryNoise(BaseModel):
 class GravityConfig(BaseModel):
     """Roll and pitch priors from a gravity-aligned odometry (:mod:`tagloc.mapping.gravity`).
 
+    Whether the odometry is gravity-aligned, and which of its axes is up, is
+    :attr:`MapBuildConfig.odometry_frame` (one definition with the localizer's).
+
     Attributes
     ----------
-    aligned_odometry : bool
-        The odometry frame's z axis is "up" (visual-inertial odometry: gravity is observable to
-        it, so its roll and pitch do not drift). Then every keyframe's roll and pitch enter the
-        graph as priors, and the map is level by physics, not by the anchors' orientation.
-        Default off (wheel or legged odometry whose frame is only as level as its start).
+    priors : bool
+        With a gravity-aligned odometry (visual-inertial: gravity is observable to it, so its
+        roll and pitch do not drift), every keyframe's roll and pitch enter the graph as
+        priors, and the map is level by physics, not by the anchors' orientation.
     sigma_deg : float
         Standard deviation of each keyframe's gravity direction, degrees (per keyframe,
         independent).
@@ -56,8 +59,18 @@ class GravityConfig(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    aligned_odometry: bool = False
+    priors: bool = True
     sigma_deg: float = Field(1.0, gt=0.0, le=45.0)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _moved(cls, data: Any) -> Any:
+        if isinstance(data, dict) and "aligned_odometry" in data:
+            raise ValueError(
+                "aligned_odometry: moved to odometry_frame.gravity_aligned (one setting for the "
+                "map builder and the localizer)"
+            )
+        return data
 
 
 class MapBuildConfig(BaseModel):
@@ -101,8 +114,12 @@ class MapBuildConfig(BaseModel):
     anchor_sigma_m, anchor_sigma_rad : float
         Prior standard deviations on anchor tags that do not carry their own
         (:class:`tagloc.mapping.anchors.Anchor`: a measured anchor's survey sigma).
+    odometry_frame : OdometryFrameConfig
+        How the odometry relates to gravity and to the body (:mod:`tagloc.frames.odometry_frame`):
+        "up" for the odometry noise (:mod:`tagloc.mapping.odometry_noise`) and, when
+        gravity-aligned, the gravity priors. Default: an upright robot base, no gravity.
     gravity : GravityConfig
-        Roll and pitch priors from a gravity-aligned odometry (default off).
+        Roll and pitch priors when the odometry is gravity-aligned.
     uncertainty_flag_m : float
         A tag whose marginal position sigma (the norm of its x, y, z sigmas) exceeds this is
         flagged in the QA report with advice (:mod:`tagloc.mapping.advice`). Default 5 cm.
@@ -155,6 +172,7 @@ class MapBuildConfig(BaseModel):
     calibration_rounds: int = Field(0, ge=0)
     joint_calibration: bool = False
     calibration_sigma: float = Field(0.1, gt=0.0)
+    odometry_frame: OdometryFrameConfig = OdometryFrameConfig()
     gravity: GravityConfig = GravityConfig()
     uncertainty_flag_m: float = Field(0.05, gt=0.0)
     lidar: LidarSurveyConfig = LidarSurveyConfig()

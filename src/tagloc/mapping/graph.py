@@ -30,10 +30,12 @@ import numpy as np
 import numpy.typing as npt
 
 from tagloc.geometry import SE3
-from tagloc.mapping.config import MapBuildConfig, OdometryNoise
+from tagloc.mapping.anchors import anchor_default_sigmas, anchor_whitening
+from tagloc.mapping.config import MapBuildConfig
 from tagloc.mapping.gravity import add_gravity_factors
-from tagloc.mapping.gtsam_bridge import PERM, cov_from_gtsam, diagonal_sigmas, solver_errors
-from tagloc.mapping.initialize import inverse_h, rotation_angle
+from tagloc.mapping.gtsam_bridge import PERM, cov_from_gtsam, solver_errors
+from tagloc.mapping.initialize import inverse_h
+from tagloc.mapping.odometry_noise import odometry_whitening
 from tagloc.mapping.scan_factors import RelativePoseFactors, add_relative_factors
 
 FloatArray = npt.NDArray[np.float64]
@@ -74,6 +76,9 @@ class GraphInput:
     up_base : (K, 3) float or None
         Gravity "up" in each keyframe's ``base`` (:mod:`tagloc.mapping.gravity`): one attitude
         prior per keyframe; None: no gravity priors.
+    odometry_up : (K, 3) float or None
+        "Up" in each keyframe's ``base`` for the odometry noise
+        (:mod:`tagloc.mapping.odometry_noise`); None: an upright base.
     relative : RelativePoseFactors, optional
         Scan-matching factors between keyframes (:mod:`tagloc.mapping.scan_factors`).
     """
@@ -88,6 +93,7 @@ class GraphInput:
     M_map_tag_init: Mapping[int, FloatArray]
     anchor_sigmas: Mapping[int, FloatArray] = field(default_factory=dict)
     up_base: FloatArray | None = None
+    odometry_up: FloatArray | None = None
     relative: RelativePoseFactors | None = None
 
 
@@ -130,20 +136,6 @@ class GraphSolution:
     linear: gtsam.GaussianFactorGraph | None = None
 
 
-def odometry_sigmas(M_odom_base: FloatArray, noise: OdometryNoise) -> FloatArray:
-    """``(K-1, 6)`` standard deviations ``[x, y, z, rx, ry, rz]`` of consecutive odometry steps."""
-    step = inverse_h(M_odom_base[:-1]) @ M_odom_base[1:]
-    dist = np.linalg.norm(step[:, :3, 3], axis=1)
-    angle = rotation_angle(np.broadcast_to(np.eye(3), step[:, :3, :3].shape), step[:, :3, :3])
-    var_t = noise.translation_var_per_m * dist + noise.translation_var_per_rad * angle
-    var_r = noise.rotation_var_per_m * dist + noise.rotation_var_per_rad * angle
-    var_t += noise.translation_floor_m**2
-    var_r += noise.rotation_floor_rad**2
-    v = noise.vertical_factor**2
-    sigmas = np.sqrt(np.column_stack([var_t, var_t, v * var_t, v * var_r, v * var_r, var_r]))
-    return np.asarray(sigmas, dtype=np.float64)
-
-
 def _kernel(config: MapBuildConfig, k: float) -> gtsam.noiseModel.mEstimator.Base:
     if config.robust == "huber":
         return gtsam.noiseModel.mEstimator.Huber.Create(k)
@@ -172,17 +164,17 @@ def add_odometry_and_anchors(
     steps = inverse_h(data.M_odom_base[:-1]) @ data.M_odom_base[1:]
     k_odo = config.odometry_robust_k
     odo_kernel = None if k_odo is None else gtsam.noiseModel.mEstimator.Huber.Create(k_odo)
-    for k, (M, sigmas) in enumerate(
-        zip(steps, odometry_sigmas(data.M_odom_base, config.odometry), strict=True)
-    ):
-        model = diagonal_sigmas(sigmas)
+    whitening = odometry_whitening(data.M_odom_base, config.odometry, data.odometry_up)
+    for k, M in enumerate(steps):
+        model = whitening.gtsam_model(k)
         if odo_kernel is not None:
             model = gtsam.noiseModel.Robust.Create(odo_kernel, model)
         graph.add(gtsam.BetweenFactorPose3(X(k), X(k + 1), _pose3(M), model))
-    default = [config.anchor_sigma_m] * 3 + [config.anchor_sigma_rad] * 3
+    default = anchor_default_sigmas(config)
     for j, M in held_tags(data.M_map_anchor, data.tag, data.M_map_tag_init).items():
-        sigmas = data.anchor_sigmas.get(j, default)
-        graph.add(gtsam.PriorFactorPose3(L(j), _pose3(M), diagonal_sigmas(sigmas)))
+        level = None if data.up_base is None else M  # gravity priors: the tilt is theirs
+        noise = anchor_whitening(data.anchor_sigmas.get(j, default), level)
+        graph.add(gtsam.PriorFactorPose3(L(j), _pose3(M), noise.gtsam_model(0)))
     if data.up_base is not None:  # gravity priors (mapping.gravity)
         keys = [X(k) for k in range(len(data.up_base))]
         add_gravity_factors(graph, keys, data.up_base, np.radians(config.gravity.sigma_deg))

@@ -43,6 +43,7 @@ from tagloc.mapping.gravity import gravity_residuals, keyframe_tilts_deg
 from tagloc.mapping.initialize import inverse_h
 from tagloc.mapping.odometry_factors import log_batch
 from tagloc.mapping.scan_factors import RelativePoseFactors
+from tagloc.mapping.whitening import AxisWhitening
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -71,9 +72,11 @@ class GraphAtSolution:
         Raw odometry steps.
     c : (4,) float
         Odometry calibration vector.
-    odometry_sigmas : (K-1, 6) float
+    odometry_noise : AxisWhitening
+        The odometry steps' noise (:mod:`tagloc.mapping.odometry_noise`).
     held : mapping of int to (4, 4) float
-    held_sigmas : mapping of int to (6,) float
+    held_noise : mapping of int to AxisWhitening
+        Each held tag's prior (:func:`tagloc.mapping.anchors.anchor_whitening`).
     up_base : (K, 3) float or None
         Gravity priors' "up" (None: no gravity priors).
     gravity_sigma_rad : float
@@ -95,9 +98,9 @@ class GraphAtSolution:
     outlier_sigma: float
     step_raw: FloatArray
     c: FloatArray
-    odometry_sigmas: FloatArray
+    odometry_noise: AxisWhitening
     held: Mapping[int, FloatArray]
-    held_sigmas: Mapping[int, FloatArray]
+    held_noise: Mapping[int, AxisWhitening]
     up_base: FloatArray | None
     gravity_sigma_rad: float
     relative: RelativePoseFactors | None = None
@@ -131,7 +134,7 @@ def factor_records(g: GraphAtSolution) -> list[dict[str, Any]]:
         Z = corrected_steps(g.step_raw, calibration_from_vector(g.c))
         B = inverse_h(g.M_map_base[:-1]) @ g.M_map_base[1:]
         e = log_batch(inverse_h(Z) @ B)
-        w = np.linalg.norm(e / g.odometry_sigmas, axis=1)
+        w = np.linalg.norm(g.odometry_noise.whiten(e), axis=1)
         for k in range(1, len(g.M_map_base)):
             r = e[k - 1]
             records.append({
@@ -143,12 +146,13 @@ def factor_records(g: GraphAtSolution) -> list[dict[str, Any]]:
             })  # fmt: skip
     for j, M in sorted(g.held.items()):
         r = log_batch((inverse_h(M) @ g.M_map_tag[j])[None])[0]
-        sigma = np.asarray(g.held_sigmas[j])
+        noise = g.held_noise[j]
         records.append({
             "type": "anchor", "family": g.tag_keys[j][0], "tag": g.tag_keys[j][1],
             "residual": _vec(r), "translation_m": _num(np.linalg.norm(r[:3])),
             "rotation_deg": _num(np.degrees(np.linalg.norm(r[3:])), 4),
-            "sigma": _vec(sigma, 9), "whitened": _num(np.linalg.norm(r / sigma), 4),
+            "sigma": _vec(noise.sigmas[0], 9),
+            "whitened": _num(np.linalg.norm(noise.whiten(r[None])[0]), 4),
         })  # fmt: skip
     if g.up_base is not None:
         tilt = keyframe_tilts_deg(g.M_map_base, g.up_base)

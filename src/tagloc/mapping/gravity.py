@@ -2,7 +2,7 @@
 
 A visual-inertial odometry observes gravity: its frame's z axis is "up", and its roll and pitch
 do not drift while its position and yaw do. With
-:attr:`~tagloc.mapping.config.GravityConfig.aligned_odometry`, the map frame's z is declared
+:attr:`tagloc.frames.OdometryFrameConfig.gravity_aligned`, the map frame's z is declared
 the same "up": keyframe ``k`` gets the prior
 
 .. math:: e_k = \\left(R_k^\\top \\hat z - u_k\\right) / \\sigma, \\qquad
@@ -31,11 +31,6 @@ from tagloc.mapping.observations import hat
 
 FloatArray = npt.NDArray[np.float64]
 _Z = np.array([0.0, 0.0, 1.0])
-
-
-def up_in_base(M_odom_base: FloatArray) -> FloatArray:
-    """``(K, 3)`` unit "up" of the odometry frame (its z axis) in each ``base``."""
-    return np.asarray(np.einsum("kji,j->ki", M_odom_base[:, :3, :3], _Z))
 
 
 def add_gravity_factors(

@@ -86,8 +86,8 @@ def initialize_keyframes(
         if known:
             i = min(known, key=lambda i: obs.range_m[i])
             M_tag = M_map_tag[int(obs.tag[i])]
-            if pred is None:
-                meas = M_tag @ inverse_h(obs.T_base_tag[i, 0])
+            if pred is None:  # the first fix: the branch the next sightings agree with
+                meas = _first_fix(obs, M_odom_base, order, bounds, M_map_tag, k, i)
             else:  # position from the tag; yaw from the track between fixes (tilts may be wrong)
                 meas = pred.copy()
                 meas[:3, 3] = M_tag[:3, 3] - pred[:3, :3] @ obs.T_base_tag[i, 0, :3, 3]
@@ -120,6 +120,51 @@ def initialize_keyframes(
     k0 = int(placed[0])
     M_map_base[:k0] = (M_map_base[k0] @ inverse_h(M_odom_base[k0])) @ M_odom_base[:k0]
     return M_map_base
+
+
+#: The first fix's rotation is the consensus of this many sightings of placed tags.
+FIRST_FIX_SIGHTINGS = 12
+
+
+def _first_fix(
+    obs: Observations,
+    M_odom_base: FloatArray,
+    order: IntArray,
+    bounds: IntArray,
+    M_map_tag: Mapping[int, FloatArray],
+    k0: int,
+    i0: int,
+) -> FloatArray:
+    """``T_map_base`` at keyframe ``k0`` from sighting ``i0``, on the IPPE branch the next
+    sightings' preferred branches agree with.
+
+    The whole start of the map hangs on the first fix: one face-on view whose wrong branch
+    happened to reproject better (ambiguity 0.2 at 4 m in a simulated drive) turned every
+    keyframe by 143 deg, and later fixes, disagreeing with that, were refused as glints. Each
+    of the next sightings of placed tags implies an ``R_map_odom`` on its better-reprojecting
+    branch (odometry over a second of driving does not drift enough to matter); the branch of
+    ``i0`` that more of them agree with (within :data:`CONSENSUS_ANGLE_RAD`) wins, and a tie
+    keeps ``i0``'s own better branch.
+    """
+    preferred: list[FloatArray] = []
+    k = k0
+    while k < len(M_odom_base) and len(preferred) < FIRST_FIX_SIGHTINGS:
+        for i in order[bounds[k] : bounds[k + 1]]:
+            j = int(obs.tag[i])
+            if j in M_map_tag and i != i0:
+                R_map_base = M_map_tag[j][:3, :3] @ obs.T_base_tag[i, 0, :3, :3].T
+                preferred.append(R_map_base @ M_odom_base[k, :3, :3].T)
+        k += 1
+    M_tag = M_map_tag[int(obs.tag[i0])]
+    R_map_odom = (
+        M_tag[:3, :3] @ np.swapaxes(obs.T_base_tag[i0, :, :3, :3], 1, 2) @ M_odom_base[k0, :3, :3].T
+    )  # (2, 3, 3): both branches of i0
+    branch = 0
+    if preferred:
+        angle = rotation_angle(R_map_odom[:, None], np.asarray(preferred)[None])  # (2, n)
+        support = (angle < CONSENSUS_ANGLE_RAD).sum(axis=1)
+        branch = int(support[1] > support[0])
+    return np.asarray(M_tag @ inverse_h(obs.T_base_tag[i0, branch]))
 
 
 def _yaw_fix(origin: FloatArray, predicted: FloatArray, fixed: FloatArray) -> FloatArray:

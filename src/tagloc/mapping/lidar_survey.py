@@ -48,13 +48,14 @@ from tagloc.lidar import (
     voxel_downsample,
 )
 from tagloc.mapping.config import MapBuildConfig
-from tagloc.mapping.graph import X, lm_params, odometry_sigmas
-from tagloc.mapping.gtsam_bridge import diagonal_sigmas, solver_errors
+from tagloc.mapping.graph import X, lm_params
+from tagloc.mapping.gtsam_bridge import solver_errors
 from tagloc.mapping.initialize import inverse_h
 from tagloc.mapping.lidar_config import LidarSurveyConfig
 from tagloc.mapping.lidar_keyframes import choose_lidar_keyframes, with_keyframes
 from tagloc.mapping.observations import Observations, interpolate_odometry
 from tagloc.mapping.odometry_factors import adjoint
+from tagloc.mapping.odometry_noise import odometry_whitening
 from tagloc.mapping.scan_factors import (
     RelativePoseFactors,
     add_relative_factors,
@@ -240,10 +241,11 @@ def scan_odometry(
                                                        M_odom[0, :3, 3]),
                                      gtsam.noiseModel.Isotropic.Sigma(6, 1e-6)))  # fmt: skip
     steps = inverse_h(M_odom[:-1]) @ M_odom[1:]
-    for k, (M, sigmas) in enumerate(zip(steps, odometry_sigmas(M_odom, config.odometry),
-                                        strict=True)):  # fmt: skip
+    up = config.odometry_frame.up_in_base(M_odom[:, :3, :3])
+    noise = odometry_whitening(M_odom, config.odometry, up)
+    for k, M in enumerate(steps):
         Z = gtsam.Pose3(gtsam.Rot3(M[:3, :3]), M[:3, 3])
-        graph.add(gtsam.BetweenFactorPose3(X(k), X(k + 1), Z, diagonal_sigmas(sigmas)))
+        graph.add(gtsam.BetweenFactorPose3(X(k), X(k + 1), Z, noise.gtsam_model(k)))
     add_relative_factors(graph, sequential, X)
     with solver_errors("the scan-matched odometry"):
         result = gtsam.LevenbergMarquardtOptimizer(graph, values, lm_params(config)).optimize()

@@ -15,13 +15,13 @@ import numpy as np
 
 from tagloc.geometry import SE3
 from tagloc.mapping.advice import coverage_gaps, uncertainty_advice
-from tagloc.mapping.anchors import anchor_default_sigmas
 from tagloc.mapping.config import MapBuildConfig
 from tagloc.mapping.exclude import survey_start_ns
-from tagloc.mapping.graph import GraphSolution, odometry_sigmas
+from tagloc.mapping.graph import GraphSolution
 from tagloc.mapping.graph_export import GraphAtSolution, factor_records
 from tagloc.mapping.initialize import inverse_h
 from tagloc.mapping.observations import Observations
+from tagloc.mapping.odometry_noise import odometry_whitening
 from tagloc.mapping.refine import Priors
 from tagloc.mapping.report import (
     BuildReport,
@@ -55,8 +55,8 @@ def graph_records(
             obs, solution.M_map_base, solution.M_map_tag, survey.cameras, survey.T_base_cam
         ),
         solution.mahalanobis, config.outlier_sigma, inverse_h(M_odom_raw[:-1]) @ M_odom_raw[1:],
-        c, odometry_sigmas(M_odom_raw, config.odometry), held,
-        {j: priors.anchor_sigmas.get(j, anchor_default_sigmas(config)) for j in held},
+        c, odometry_whitening(M_odom_raw, config.odometry, priors.odometry_up), held,
+        priors.held_whitening(held, config),
         priors.up_base, float(np.radians(config.gravity.sigma_deg)), relative,
     )  # fmt: skip
     return tuple(factor_records(at_solution))
@@ -157,7 +157,7 @@ def map_and_report(
         iterations=solution.iterations,
         error_initial=solution.error_initial,
         error_final=solution.error_final,
-        gravity_priors=config.gravity.aligned_odometry,
+        gravity_priors=config.odometry_frame.gravity_aligned and config.gravity.priors,
         uncertainty_flag_m=config.uncertainty_flag_m,
     )
     return TagMap.from_entries(entries), report

@@ -8,8 +8,9 @@ is
 
 with ``Z_k(c)`` the raw odometry step corrected by the calibration vector ``c``
 (:func:`~tagloc.mapping.calibration.corrected_steps`: distance scale and crab drift, turn scale,
-yaw bias per metre) and ``sigma_k`` the random-walk noise of
-:func:`tagloc.mapping.graph.odometry_sigmas`. Right perturbations ``x Exp(xi)``,
+yaw bias per metre) and the division by ``sigma_k`` the whitening of
+:func:`tagloc.mapping.odometry_noise.odometry_whitening` (the random-walk noise, level with
+gravity). Right perturbations ``x Exp(xi)``,
 ``xi = [x, y, z, rx, ry, rz]``; with ``B = x_{k-1}^-1 x_k``, ``E = Z^-1 B`` and
 ``J = J_r^-1(Log E)`` (Sola et al. 2018, Sec. IV-B):
 
@@ -37,6 +38,7 @@ from tagloc.mapping.calibration import (
 )
 from tagloc.mapping.initialize import inverse_h
 from tagloc.mapping.observations import hat
+from tagloc.mapping.whitening import AxisWhitening
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -68,19 +70,19 @@ def adjoint(M: FloatArray) -> FloatArray:
 
 
 def odometry_residuals(
-    M_map_base: FloatArray, step_raw: FloatArray, c: FloatArray, sigmas: FloatArray
+    M_map_base: FloatArray, step_raw: FloatArray, c: FloatArray, noise: AxisWhitening
 ) -> FloatArray:
     """``(K-1, 6)`` whitened odometry errors ``e_k`` (module docstring)."""
     Z = corrected_steps(step_raw, calibration_from_vector(c))
     B = inverse_h(M_map_base[:-1]) @ M_map_base[1:]
-    return log_batch(inverse_h(Z) @ B) / sigmas
+    return noise.whiten(log_batch(inverse_h(Z) @ B))
 
 
 def linearize_odometry(
     M_map_base: FloatArray,
     step_raw: FloatArray,
     c: FloatArray,
-    sigmas: FloatArray,
+    noise: AxisWhitening,
     calibrate: bool,
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray | None]:
     """Whitened errors and Jacobians of the odometry factors at the given state.
@@ -92,7 +94,8 @@ def linearize_odometry(
         Raw odometry steps ``T_odom_base_{k-1}^-1 T_odom_base_k``.
     c : (4,) float
         Calibration vector (:func:`~tagloc.mapping.calibration.calibration_vector`).
-    sigmas : (K-1, 6) float
+    noise : AxisWhitening
+        The steps' noise (:func:`tagloc.mapping.odometry_noise.odometry_whitening`).
     calibrate : bool
         Also return the Jacobian in ``c``.
 
@@ -115,16 +118,16 @@ def linearize_odometry(
     B = inverse_h(M_map_base[:-1]) @ M_map_base[1:]
     E = inverse_h(Z) @ B
     e, J_e_E = _se3(E).log(jacobians=True)  # J_r^-1(e)
-    whiten = 1.0 / sigmas[:, :, None]
-    A_next = J_e_E * whiten
-    A_prev = -(J_e_E @ adjoint(inverse_h(B))) * whiten
+    A_next = noise.whiten_jacobian(J_e_E)
+    A_prev = -noise.whiten_jacobian(J_e_E @ adjoint(inverse_h(B)))
     if not calibrate:
-        return e / sigmas, A_prev, A_next, None
+        return noise.whiten(e), A_prev, A_next, None
     D = corrected_step_jacobians(step_raw, Z)
-    A_c = -(J_e_E @ adjoint(inverse_h(E)) @ D) * whiten
-    return e / sigmas, A_prev, A_next, A_c
+    A_c = -noise.whiten_jacobian(J_e_E @ adjoint(inverse_h(E)) @ D)
+    return noise.whiten(e), A_prev, A_next, A_c
 
 
-def prior_residuals(M: FloatArray, M_prior: FloatArray, sigmas: FloatArray) -> FloatArray:
-    """``(n, 6)`` whitened ``Log(M_prior^-1 M) / sigmas`` of pose priors (Jacobian ``1/sigma``)."""
-    return log_batch(inverse_h(M_prior) @ M) / sigmas
+def prior_residuals(M: FloatArray, M_prior: FloatArray, noise: AxisWhitening) -> FloatArray:
+    """``(n, 6)`` whitened ``Log(M_prior^-1 M)`` of pose priors (Jacobian: the whitening of the
+    identity)."""
+    return noise.whiten(log_batch(inverse_h(M_prior) @ M))

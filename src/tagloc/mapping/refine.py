@@ -32,6 +32,7 @@ import numpy.typing as npt
 
 from tagloc.camera import CameraModel
 from tagloc.geometry import SE3
+from tagloc.mapping.anchors import anchor_default_sigmas, anchor_whitening
 from tagloc.mapping.calibration import N_CALIBRATION
 from tagloc.mapping.config import MapBuildConfig
 from tagloc.mapping.corner_graph import (
@@ -43,7 +44,7 @@ from tagloc.mapping.corner_graph import (
     linearize_corners,
 )
 from tagloc.mapping.flips import flip_stuck_tags
-from tagloc.mapping.graph import GraphSolution, L, X, odometry_sigmas
+from tagloc.mapping.graph import GraphSolution, L, X
 from tagloc.mapping.gravity import gravity_jacobians, gravity_residuals
 from tagloc.mapping.gtsam_bridge import solver_errors
 from tagloc.mapping.initialize import inverse_h, rotation_angle
@@ -53,7 +54,9 @@ from tagloc.mapping.odometry_factors import (
     odometry_residuals,
     prior_residuals,
 )
+from tagloc.mapping.odometry_noise import odometry_whitening
 from tagloc.mapping.scan_factors import RelativePoseFactors, linearize_relative, relative_cost
+from tagloc.mapping.whitening import AxisWhitening
 
 logger = logging.getLogger(__name__)
 FloatArray = npt.NDArray[np.float64]
@@ -70,10 +73,25 @@ MAX_FLIP_PASSES = 2
 class Priors:
     """Priors besides the corners and the odometry: each held tag's sigmas ``(6,)`` (m, rad;
     missing: the configuration's defaults), gravity "up" ``(K, 3)`` in each keyframe's base
-    (None: no gravity priors, :mod:`tagloc.mapping.gravity`)."""
+    (None: no gravity priors, :mod:`tagloc.mapping.gravity`), and "up" ``(K, 3)`` for the
+    odometry noise (None: an upright base, :mod:`tagloc.mapping.odometry_noise`)."""
 
     anchor_sigmas: Mapping[int, FloatArray] = field(default_factory=dict)
     up_base: FloatArray | None = None
+    odometry_up: FloatArray | None = None
+
+    def held_whitening(
+        self, held: Mapping[int, FloatArray], config: MapBuildConfig
+    ) -> dict[int, AxisWhitening]:
+        """Each held tag's prior (:func:`~tagloc.mapping.anchors.anchor_whitening`): along
+        ``map``'s axes with the tilt free when gravity priors level the map."""
+        default = anchor_default_sigmas(config)
+        return {
+            j: anchor_whitening(
+                self.anchor_sigmas.get(j, default), None if self.up_base is None else M
+            )
+            for j, M in held.items()
+        }
 
 
 @dataclass(frozen=True, slots=True)
@@ -105,9 +123,8 @@ class _Problem:
         self.calibrate = config.joint_calibration
         self.cameras, self.T_base_cam = cameras, T_base_cam
         self.step_raw = inverse_h(M_odom_raw[:-1]) @ M_odom_raw[1:]
-        self.sigmas = odometry_sigmas(M_odom_raw, config.odometry)
-        default = np.array([config.anchor_sigma_m] * 3 + [config.anchor_sigma_rad] * 3)
-        self.held_sigmas = {j: np.asarray(priors.anchor_sigmas.get(j, default)) for j in held}
+        self.noise = odometry_whitening(M_odom_raw, config.odometry, priors.odometry_up)
+        self.held_noise = priors.held_whitening(self.held, config)
         self.up_base = priors.up_base
         self.gravity_sigma = float(np.radians(config.gravity.sigma_deg))
         self.kind, self.k = config.robust, config.robust_k
@@ -136,13 +153,13 @@ class _Problem:
         """The robust cost (corners capped, Huber or Gaussian odometry, priors)."""
         r, _, _ = self.corners(state)
         total = float(np.sum(corner_cost(r, self.kind, self.k)))
-        e = odometry_residuals(state.M_map_base, self.step_raw, state.c, self.sigmas)
+        e = odometry_residuals(state.M_map_base, self.step_raw, state.c, self.noise)
         s = np.sum(e**2, axis=1)
         k = self.config.odometry_robust_k
         total += float(np.sum(0.5 * s if k is None else kernel_cost(s, "huber", k)))
         for j, M in self.held.items():
             total += 0.5 * float(
-                np.sum(prior_residuals(state.M_map_tag[j][None], M[None], self.held_sigmas[j]) ** 2)
+                np.sum(prior_residuals(state.M_map_tag[j][None], M[None], self.held_noise[j]) ** 2)
             )
         if self.up_base is not None:
             g = gravity_residuals(state.M_map_base, self.up_base, self.gravity_sigma)
@@ -164,7 +181,7 @@ class _Problem:
                 X(int(obs.keyframe[m])), A_base[m], L(int(obs.tag[m])), A_tag[m], b[m], unit8
             ))  # fmt: skip
         e, A_prev, A_next, A_c = linearize_odometry(
-            state.M_map_base, self.step_raw, state.c, self.sigmas, self.calibrate
+            state.M_map_base, self.step_raw, state.c, self.noise, self.calibrate
         )
         sqrt_w = np.sqrt(self._odometry_weights(e))[:, None]
         e, A_prev, A_next = e * sqrt_w, A_prev * sqrt_w[..., None], A_next * sqrt_w[..., None]
@@ -177,9 +194,10 @@ class _Problem:
                     -e[k], unit6,
                 ))  # fmt: skip
         for j, M in self.held.items():
-            sigmas = self.held_sigmas[j]
-            e_held = prior_residuals(state.M_map_tag[j][None], M[None], sigmas)[0]
-            graph.add(gtsam.JacobianFactor(L(j), np.diag(1.0 / sigmas), -e_held, unit6))
+            noise = self.held_noise[j]
+            e_held = prior_residuals(state.M_map_tag[j][None], M[None], noise)[0]
+            W = noise.whiten_jacobian(np.eye(6)[None])[0]
+            graph.add(gtsam.JacobianFactor(L(j), W, -e_held, unit6))
         if self.up_base is not None:  # gravity priors (mapping.gravity)
             g = gravity_residuals(state.M_map_base, self.up_base, self.gravity_sigma)
             A_g = gravity_jacobians(state.M_map_base, self.gravity_sigma)

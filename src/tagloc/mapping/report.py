@@ -76,7 +76,7 @@ class BuildReport:
         optimized keyframes (:func:`tagloc.mapping.gravity.map_tilt_deg`): the map's tilt against
         gravity when the odometry is gravity-aligned.
     gravity_priors : bool
-        Whether keyframes had gravity priors (``MapBuildConfig.gravity.aligned_odometry``).
+        Whether keyframes had gravity priors (a gravity-aligned ``MapBuildConfig.odometry_frame``).
     uncertainty_flag_m : float
         The position sigma above which a tag is flagged ``uncertain`` (with advice).
     factors : tuple of dict
