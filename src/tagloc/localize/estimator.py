@@ -1,30 +1,23 @@
 """``MapOdomEstimator``: the ``map -> odom`` correction as an iterated error-state EKF on SE(3).
 
-The estimator is the state and its arithmetic only: it applies what it is given. What it is
-given (start-up, gaps, kidnap, suspect sources, the gates, the capped publication) is decided by
+The estimator is the state and its arithmetic: it applies what it is given. What it is given
+(the gates, start-up, gaps, kidnap, suspect sources, the capped publication) is decided by
 :class:`~tagloc.localize.policy.FixPolicy`; :class:`~tagloc.localize.filter.MapOdomFilter`
 composes the two.
 
-State and frames
-    ``X = T_map_odom`` and, with odometry calibration (the default; :mod:`tagloc.localize.motion`),
-    its 4 parameters ``c = [scale, lateral, yaw_per_m, yaw_scale]``. The error state is
-    ``[dx, dc]`` with covariance ``P`` ((d + 4, d + 4); (d, d) without calibration):
-    ``X_true = X @ Exp(dx)``, ``c_true = c + dc``, ``dx`` in the right tangent of ``X``, ordered
-    ``[x, y, z, rx, ry, rz]`` (d = 6). Planar mode estimates ``(x, y, yaw)`` on SE(2) (d = 3,
-    ``[x, y, theta]``): z, roll and pitch of ``T_map_odom`` are pinned at 0 and a fix enters as
-    its planar projection (:meth:`Candidate.of_fix <tagloc.localize.candidate.Candidate.of_fix>`),
-    so its z, roll and pitch are ignored. Odometry ``A = T_odom_base(t)`` is read from a
-    :class:`~tagloc.frames.TransformBuffer` into which the caller inserts ``odom -> base``
-    samples (:class:`~tagloc.localize.odometry_path.OdometryPath`).
-Prediction (:class:`~tagloc.localize.odometry_path.OdometryPath`)
-    A random walk driven by the motion, plus the calibration drift: ``X <- X (+) M c``,
-    ``P <- F P F^T + Q``.
-Update (:mod:`tagloc.localize.iekf`)
-    An iterated error-state EKF on the manifold with right perturbations; a fix older than the
-    state is compared with the state moved back to its stamp.
-Partial fixes
-    A fix that measures only some directions (a lidar scan match) enters through
-    :meth:`MapOdomEstimator.update_partial` (:mod:`tagloc.localize.projected_update`).
+State: ``X = T_map_odom`` and, with odometry calibration (:mod:`tagloc.localize.motion`), its
+parameters ``c = [scale, lateral, yaw_per_m, yaw_scale]``; error state ``[dx, dc]`` with
+covariance ``P`` ((d + 4, d + 4); (d, d) without calibration), ``X_true = X @ Exp(dx)``,
+``c_true = c + dc``, ``dx`` in the right tangent of ``X`` ordered ``[x, y, z, rx, ry, rz]``
+(d = 6). Planar mode estimates ``(x, y, yaw)`` on SE(2) (d = 3, ``[x, y, theta]``): z, roll and
+pitch of ``T_map_odom`` stay 0 and a fix enters as its planar projection
+(:meth:`Candidate.of_fix <tagloc.localize.candidate.Candidate.of_fix>`). The odometry
+``A = T_odom_base(t)`` comes from a :class:`~tagloc.frames.TransformBuffer` the caller fills.
+
+- Prediction over the odometry path, ``X <- X (+) M c``, ``P <- F P F^T + Q``:
+  :mod:`tagloc.localize.odometry_path`.
+- The iterated update, late fixes (compared with the state moved back to their stamp) and
+  partial fixes (the Schmidt gain): :mod:`tagloc.localize.iekf`.
 """
 
 from __future__ import annotations
@@ -76,9 +69,8 @@ class MapOdomEstimator:
     path : OdometryPath
         The odometry lookups and path integrals the estimator uses.
     revision : int
-        Counts the changes of the state (``X``, calibration, ``P``, stamp: a prediction, an
-        applied fix, a (re)initialization): what is computed from the state stays valid while
-        it is unchanged (for callers that cache, e.g. :meth:`pose_at`).
+        Counts the changes of the state (a prediction, an applied fix, a reset, added noise):
+        what is computed from the state stays valid while it is unchanged.
     """
 
     def __init__(
@@ -150,12 +142,7 @@ class MapOdomEstimator:
     @property
     def pose(self) -> Pose:
         """The estimate in the estimator's group: ``T_map_odom`` on SE(3), or SE(2) planar.
-
-        Raises
-        ------
-        LocalizeError
-            Before initialization.
-        """
+        Raises ``LocalizeError`` before initialization."""
         if self._X is None:
             raise LocalizeError(
                 "the map -> odom filter is not initialized: it needs k consistent fixes "
@@ -187,14 +174,9 @@ class MapOdomEstimator:
 
     # ----- setting and predicting ------------------------------------------------------------
     def initialize(self, stamp_ns: int, T_map_odom: SE3, cov: FloatArray) -> None:
-        """Set an explicit prior ``T_map_odom`` with its ``(6, 6)`` covariance; planar mode
-        keeps its x, y, yaw (the covariance projected).
-
-        Raises
-        ------
-        LocalizeError
-            On a bad covariance; ``TransformLookupError`` without odometry at ``stamp_ns``.
-        """
+        """Set an explicit prior ``T_map_odom`` with its ``(6, 6)`` covariance (planar: its x,
+        y, yaw, the covariance projected). Raises ``LocalizeError`` on a bad covariance,
+        ``TransformLookupError`` without odometry at ``stamp_ns``."""
         cov6 = check_covariance(cov, 6, "initialize: cov")
         A = self.path.lookup(stamp_ns)
         if self.planar:
@@ -219,14 +201,8 @@ class MapOdomEstimator:
         """Predict over the odometry path from the state's stamp to ``stamp_ns`` (``odom``: its
         ``T_odom_base``, looked up if None): ``X <- X (+) M c``, ``P <- F P F^T + Q``. Returns
         the path's motion (a pose that drifts with the state moves by :meth:`drifted`).
-
-        Raises
-        ------
-        LocalizeError
-            Before initialization, or for a stamp older than the state's.
-        TransformLookupError
-            If the odometry at ``stamp_ns`` is not buffered.
-        """
+        Raises ``LocalizeError`` before initialization or for a stamp older than the state's,
+        ``TransformLookupError`` if the odometry at ``stamp_ns`` is not buffered."""
         X = self.pose
         if stamp_ns < self._stamp:
             raise LocalizeError(f"predict: {stamp_ns} ns is before the state ({self._stamp} ns)")
@@ -249,14 +225,8 @@ class MapOdomEstimator:
 
     def add_process_noise(self, Q: FloatArray) -> None:
         """Add ``Q`` ((6, 6), symmetric positive semi-definite, ``[x, y, z, rx, ry, rz]``) to the
-        covariance of ``T_map_odom`` now (planar: its x, y, yaw block). Before initialization:
-        nothing.
-
-        Raises
-        ------
-        LocalizeError
-            If ``Q`` is not (6, 6), finite and symmetric.
-        """
+        covariance of ``T_map_odom`` now (planar: its x, y, yaw block); nothing before
+        initialization. Raises ``LocalizeError`` unless ``Q`` is (6, 6), finite, symmetric."""
         if self._X is None:
             return
         Q6 = np.asarray(Q, dtype=np.float64)
@@ -275,15 +245,9 @@ class MapOdomEstimator:
         ``P'`` the pose block of ``F P F^T + Q`` (``F = [[I, M], [0, I]]``, ``Q`` the random
         walk between the two stamps; without calibration ``P + Q``). ``correction`` (the
         estimator's group): compose it, drifted the same way, instead of the estimate (same
-        covariance; e.g. the published correction).
-
-        Raises
-        ------
-        LocalizeError
-            Before initialization.
-        TransformLookupError
-            If the odometry at ``stamp_ns`` (or on the path to it) is not buffered.
-        """
+        covariance; e.g. the published correction). Raises ``LocalizeError`` before
+        initialization, ``TransformLookupError`` if the odometry at ``stamp_ns`` (or on the
+        path to it) is not buffered."""
         X = self.pose
         A3 = self.path.lookup(stamp_ns)
         motion = self.path.motion(self._stamp, stamp_ns, self._A, A3)
@@ -310,14 +274,9 @@ class MapOdomEstimator:
     def innovation(self, cand: Candidate, *, late: bool = True) -> Innovation:
         """The fix ``cand`` linearized at the state: innovation, Jacobian, ``S^-1``, ``d2``
         (:class:`~tagloc.localize.iekf.Innovation`). A fix older than the state is compared
-        with the state moved back to its stamp (module docstring, "Late fixes"); ``late=False``
-        compares it with the state as it is.
-
-        Raises
-        ------
-        LocalizeError
-            Before initialization.
-        """
+        with the state moved back to its stamp (:func:`~tagloc.localize.iekf.innovate`);
+        ``late=False`` compares it with the state as it is. Raises ``LocalizeError`` before
+        initialization."""
         X = self.pose
         back = Q_back = None
         if late and cand.stamp_ns < self._stamp:  # the path back to the fix's stamp
@@ -329,15 +288,10 @@ class MapOdomEstimator:
     def update(
         self, cand: Candidate, innov: Innovation | None = None, *, newest: bool = True
     ) -> None:
-        """Apply a full fix (iterated update, module docstring); ``innov``: its
+        """Apply a full fix (:func:`~tagloc.localize.iekf.iterated_update`); ``innov``: its
         :meth:`innovation` at the current state (computed if None). ``newest=False`` leaves
-        :attr:`updated_ns` as it is (the fixes of a restart after the first).
-
-        Raises
-        ------
-        LocalizeError
-            Before initialization, or for a partial fix (:meth:`update_partial`).
-        """
+        :attr:`updated_ns` as it is (the fixes of a restart after the first). Raises
+        ``LocalizeError`` before initialization or for a partial fix."""
         if cand.basis is not None:
             raise LocalizeError("update: a partial fix enters through update_partial")
         self._apply(cand, innov, newest)
@@ -346,13 +300,8 @@ class MapOdomEstimator:
         """Apply a partial fix (:meth:`Candidate.of_partial
         <tagloc.localize.candidate.Candidate.of_partial>`): the iterated update with the
         Schmidt gain, which never moves the estimate along an unmeasured direction
-        (:mod:`tagloc.localize.projected_update`).
-
-        Raises
-        ------
-        LocalizeError
-            Before initialization, or for a full fix (:meth:`update`).
-        """
+        (:mod:`tagloc.localize.projected_update`). Raises ``LocalizeError`` before
+        initialization or for a full fix."""
         if cand.basis is None:
             raise LocalizeError("update_partial: a full fix enters through update")
         self._apply(cand, innov, True)

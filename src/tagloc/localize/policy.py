@@ -40,7 +40,7 @@ from tagloc.localize.events import EventKind, EventLog, FilterEvent
 from tagloc.localize.fix import FloatArray, PartialFix, TagFix
 from tagloc.localize.gating import ConsistencyBuffer, CorrectionCap, QualityLimits, chi2_threshold
 from tagloc.localize.publisher import CorrectionPublisher
-from tagloc.localize.recovery import KidnapRule, RecoveryBooks, SuspectRule
+from tagloc.localize.recovery import GapRule, KidnapRule, RecoveryBooks, SuspectRule
 
 __all__ = ["FixPolicy"]
 
@@ -52,18 +52,14 @@ class FixPolicy:
 
     Parameters
     ----------
-    estimator : MapOdomEstimator
+    estimator, cap : MapOdomEstimator, CorrectionCap
     quality : QualityLimits
     chi2_quantile : float
         Gate quantile; the threshold is ``chi2.ppf(q, dof)`` (a partial fix: its ``k`` dof).
     k_consistent, consistency_window_ns : int
-        Start-up and re-acquisition after a gap need ``k`` mutually consistent fixes within
-        the window.
-    gap_ns : int
-    gap_m : float
-        A gap: no accepted fix for longer than ``gap_ns`` or over more than ``gap_m`` travelled.
-    kidnap : KidnapRule
-    suspect : SuspectRule
+        Start-up and re-acquisition need ``k`` mutually consistent fixes within the window.
+    gap : GapRule
+    kidnap, suspect : KidnapRule, SuspectRule
     cap : CorrectionCap
         Per-update cap of the published correction (and whether a (re)initialization snaps).
     history_size, max_events : int
@@ -76,7 +72,6 @@ class FixPolicy:
     estimator : MapOdomEstimator
     threshold : float
         The chi-square gate of a full fix.
-    cap : CorrectionCap
     events : EventLog
     publisher : CorrectionPublisher
         The published correction and its history.
@@ -88,18 +83,16 @@ class FixPolicy:
 
     def __init__(
         self, estimator: MapOdomEstimator, *, quality: QualityLimits, chi2_quantile: float,
-        k_consistent: int, consistency_window_ns: int, gap_ns: int, gap_m: float,
-        kidnap: KidnapRule, suspect: SuspectRule, cap: CorrectionCap, history_size: int,
-        max_events: int, speed_limit: tuple[float, float] | None = None,
+        k_consistent: int, consistency_window_ns: int, gap: GapRule, kidnap: KidnapRule,
+        suspect: SuspectRule, cap: CorrectionCap, history_size: int, max_events: int,
+        speed_limit: tuple[float, float] | None = None,
     ) -> None:  # fmt: skip
         self.estimator = est = estimator
         self._quality, self._quantile = quality, chi2_quantile
         self.threshold = chi2_threshold(chi2_quantile, est.dof)
-        self._gap_ns, self._gap_m = gap_ns, gap_m
         pair_noise = est.path.pair_noise
-        self._held = ConsistencyBuffer(
-            k_consistent, consistency_window_ns, self.threshold, 1, pair_noise
-        )
+        self._held = ConsistencyBuffer(k_consistent, consistency_window_ns, self.threshold, 1,
+                                       pair_noise)  # fmt: skip
         self.recovery = RecoveryBooks(kidnap, suspect, self.threshold, pair_noise)
         self._kidnap_on = kidnap.n_fixes > 0
         self.cap = cap
@@ -108,8 +101,7 @@ class FixPolicy:
                                              speed_limit)  # fmt: skip
         self._batch: tuple[tuple[TagFix, EventKind], ...] = ()
         self.batch_serial = 0
-        self._gap = False
-        self._ref_stamp, self._ref_odometer = 0, 0.0  # the last accepted fix, for the gap rule
+        self._gap = gap
 
     @classmethod
     def from_config(
@@ -117,7 +109,7 @@ class FixPolicy:
         suspect: SuspectConfig, cap: CapConfig, filter: FilterConfig,
     ) -> FixPolicy:  # fmt: skip
         """From the sections of ``localizer.yaml`` (seconds become nanoseconds, degrees
-        radians)."""
+        radians; the speed limit None when neither of its bounds is set)."""
         v, w = cap.max_speed_m_s, cap.max_rate_deg_s
         speed = None if v is None and w is None else (
             math.inf if v is None else v, math.inf if w is None else math.radians(w)
@@ -128,7 +120,7 @@ class FixPolicy:
                                   gates.max_range_m),
             chi2_quantile=gates.chi2_quantile, k_consistent=gates.k_consistent,
             consistency_window_ns=round(gates.consistency_window_s * S_NS),
-            gap_ns=round(gates.gap_s * S_NS), gap_m=gates.gap_m,
+            gap=GapRule(round(gates.gap_s * S_NS), gates.gap_m),
             kidnap=KidnapRule.from_config(kidnap), suspect=SuspectRule.from_config(suspect, kidnap),
             cap=CorrectionCap(cap.max_translation_m, math.radians(cap.max_rotation_deg),
                               cap.snap_on_initialize),
@@ -138,7 +130,7 @@ class FixPolicy:
     @property
     def reacquiring(self) -> bool:
         """True after a gap until ``k`` consistent fixes re-acquire the state."""
-        return self._gap
+        return self._gap.active
 
     @property
     def last_batch(self) -> tuple[tuple[TagFix, EventKind], ...]:
@@ -151,7 +143,7 @@ class FixPolicy:
         """An explicit prior (:meth:`MapOdomEstimator.initialize
         <tagloc.localize.estimator.MapOdomEstimator.initialize>`), published at once."""
         self.estimator.initialize(stamp_ns, T_map_odom, cov)
-        self._restarted(stamp_ns)
+        self._gap.restart(stamp_ns, self.estimator.odometer_m)
         self._publish(stamp_ns, snap=True)
         return self._event(stamp_ns, EventKind.INITIALIZED, detail="explicit prior")
 
@@ -184,9 +176,12 @@ class FixPolicy:
             self._advance(fix.stamp_ns, A3)
         if self.recovery.sources.is_suspect(fix.source):
             return self._reject_suspect(cand)
-        if self._gap or self._gap_started(fix.stamp_ns):
-            return self._hold(cand, initial=False)
-        return self._gate(cand)
+        if not self._gap.active:
+            began = self._gap.starts(fix.stamp_ns, est.odometer_m)
+            if began is None:
+                return self._gate(cand)
+            self._event(fix.stamp_ns, EventKind.GAP, detail=began)
+        return self._hold(cand, initial=False)
 
     def decide_partial(self, fix: PartialFix) -> FilterEvent:
         """Decide on a fix that measures only the directions ``fix.basis``: the chi-square gate
@@ -215,11 +210,10 @@ class FixPolicy:
             return self._event(fix.stamp_ns, EventKind.GATED_CHI2, fix.source, innov.d2, threshold)
         est.update_partial(cand, innov)
         if k == est.dof:
-            if self._gap:
-                self._gap = False
+            if self._gap.active:  # a fix of every direction ends a gap
+                self._gap.active = False
                 self._discard(self._held.clear())
-            self._ref_stamp = max(self._ref_stamp, fix.stamp_ns)
-            self._ref_odometer = est.odometer_m
+            self._gap.accepted(fix.stamp_ns, est.odometer_m)
         event = self._event(fix.stamp_ns, EventKind.ACCEPTED, fix.source, innov.d2, threshold)
         self._publish(fix.stamp_ns, snap=False)
         return event
@@ -245,8 +239,7 @@ class FixPolicy:
             return event
         est.update(cand, innov)
         self.recovery.on_accepted(fix.source, d2)
-        self._ref_stamp = max(self._ref_stamp, fix.stamp_ns)
-        self._ref_odometer = est.odometer_m
+        self._gap.accepted(fix.stamp_ns, est.odometer_m)
         event = self._event(fix.stamp_ns, EventKind.ACCEPTED, fix.source, d2)
         self._publish(fix.stamp_ns, snap=False)
         return event
@@ -260,18 +253,6 @@ class FixPolicy:
         if self.recovery.on_suspect_fix(fix.source, d2 <= self.threshold):
             self._event(fix.stamp_ns, EventKind.SOURCE_CLEARED, fix.source, d2)
         return event
-
-    def _gap_started(self, stamp_ns: int) -> bool:
-        travelled = self.estimator.odometer_m - self._ref_odometer
-        if stamp_ns - self._ref_stamp <= self._gap_ns and travelled <= self._gap_m:
-            return False
-        self._gap = True
-        self._event(
-            stamp_ns, EventKind.GAP,
-            detail=f"no accepted fix for {(stamp_ns - self._ref_stamp) / S_NS:.1f} s, "
-            f"{travelled:.1f} m: waiting for consistent fixes",
-        )  # fmt: skip
-        return True
 
     def _hold(self, cand: Candidate, *, initial: bool) -> FilterEvent:
         """Hold a fix until ``k`` mutually consistent ones; then initialize or apply them."""
@@ -287,8 +268,7 @@ class FixPolicy:
             self._reinitialize(found, EventKind.INITIALIZED)
             return event
         self._discard(self._held.clear())
-        self._gap = False
-        self._ref_stamp, self._ref_odometer = found[-1].stamp_ns, self.estimator.odometer_m
+        self._gap.restart(found[-1].stamp_ns, self.estimator.odometer_m)
         if self._kidnap_on and all(
             self.estimator.innovation(m).d2 > self.threshold for m in found
         ):
@@ -305,12 +285,12 @@ class FixPolicy:
         ``P``, the others are applied as updates."""
         est, first = self.estimator, found[0]
         est.reset(first.stamp_ns, first.odom, first.T_map_odom, first.cov)
-        self._restarted(first.stamp_ns)
+        self._gap.restart(first.stamp_ns, est.odometer_m)
         for cand in found[1:]:
             if cand.stamp_ns > est.stamp_ns:
                 self._advance(cand.stamp_ns, cand.odom)
             est.update(cand, est.innovation(cand, late=False), newest=False)
-        self._ref_stamp, self._ref_odometer = est.stamp_ns, est.odometer_m
+        self._gap.restart(est.stamp_ns, est.odometer_m)
         self.recovery.on_reinitialized(found)
         self._discard(self._held.clear())
         self._set_batch([(c.fix, kind) for c in found])
@@ -324,11 +304,6 @@ class FixPolicy:
         self._publish(est.stamp_ns, snap=snap)
 
     # ----- helpers ---------------------------------------------------------------------------
-    def _restarted(self, stamp_ns: int) -> None:
-        """A new state: no gap, the gap rule counts from here."""
-        self._gap = False
-        self._ref_stamp, self._ref_odometer = stamp_ns, self.estimator.odometer_m
-
     def _advance(self, stamp_ns: int, odom: SE3) -> None:
         """Predict the estimator; the published correction drifts with it (recorded by the
         next publication or odometry step)."""

@@ -1,4 +1,4 @@
-"""What the fix policy learns from gated fixes: a suspect source (a moved tag) or a kidnap.
+"""When the fix policy stops trusting a source or the state: suspect sources, kidnaps, gaps.
 
 A fix the chi-square gate refuses says one of two things. Either its source is wrong (a tag
 moved or mis-surveyed since the survey: its fixes are gated again and again, the same way, while
@@ -6,8 +6,11 @@ other sources are accepted) and the source is flagged suspect
 (:class:`~tagloc.localize.gating.SourceMonitor`); or the state is wrong (the robot was carried
 away: fixes of several sources, or many of one far from the estimate, agree with each other and
 not with the state) and the state is re-initialized from them (the kidnap test, a
-:class:`~tagloc.localize.gating.ConsistencyBuffer`). :class:`RecoveryBooks` keeps both books;
-:class:`~tagloc.localize.policy.FixPolicy` acts on their verdicts.
+:class:`~tagloc.localize.gating.ConsistencyBuffer`). :class:`RecoveryBooks` keeps both books.
+
+Without accepted fixes for long (:class:`GapRule`: a time or a distance travelled) the state is
+unconfirmed: the policy holds fixes again until ``k`` consistent ones re-acquire it.
+:class:`~tagloc.localize.policy.FixPolicy` acts on these verdicts.
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ from tagloc.localize.candidate import Candidate, Pose, pair_d2
 from tagloc.localize.config import KidnapConfig, SuspectConfig
 from tagloc.localize.gating import ConsistencyBuffer, CorrectionCap, PairNoise, SourceMonitor
 
-__all__ = ["KidnapRule", "RecoveryBooks", "SuspectRule"]
+__all__ = ["GapRule", "KidnapRule", "RecoveryBooks", "SuspectRule"]
 
 S_NS = 1_000_000_000
 
@@ -172,3 +175,41 @@ class RecoveryBooks:
         tag moved or mis-surveyed by less is flagged suspect instead)."""
         T = (X @ cand.A).inverse() @ cand.z  # type: ignore[operator]
         return float(np.linalg.norm(T.translation)) >= self._rule.one_source_min_jump_m
+
+
+class GapRule:
+    """A gap: no accepted fix for longer than ``gap_ns`` or over more than ``gap_m`` travelled
+    (counted from the newest accepted fix or (re)initialization).
+
+    Attributes
+    ----------
+    active : bool
+        In a gap (until :meth:`restart`, or the policy ends it).
+    """
+
+    def __init__(self, gap_ns: int, gap_m: float) -> None:
+        self._gap_ns, self._gap_m = gap_ns, gap_m
+        self.active = False
+        self._ref_stamp, self._ref_odometer = 0, 0.0
+
+    def starts(self, stamp_ns: int, odometer_m: float) -> str | None:
+        """Whether a fix at ``stamp_ns`` (odometer ``odometer_m``) begins a gap: its
+        description (and the gap is :attr:`active`), or None."""
+        travelled = odometer_m - self._ref_odometer
+        if stamp_ns - self._ref_stamp <= self._gap_ns and travelled <= self._gap_m:
+            return None
+        self.active = True
+        return (
+            f"no accepted fix for {(stamp_ns - self._ref_stamp) / S_NS:.1f} s, "
+            f"{travelled:.1f} m: waiting for consistent fixes"
+        )
+
+    def accepted(self, stamp_ns: int, odometer_m: float) -> None:
+        """A fix at ``stamp_ns`` was applied (a late one does not move the reference back)."""
+        self._ref_stamp = max(self._ref_stamp, stamp_ns)
+        self._ref_odometer = odometer_m
+
+    def restart(self, stamp_ns: int, odometer_m: float) -> None:
+        """The state was (re)initialized or re-acquired at ``stamp_ns``: no gap."""
+        self.active = False
+        self._ref_stamp, self._ref_odometer = stamp_ns, odometer_m
