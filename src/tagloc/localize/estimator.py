@@ -124,12 +124,6 @@ class MapOdomEstimator:
         return self._stamp
 
     @property
-    def updated_ns(self) -> int:
-        """Stamp of the newest fix applied (ns); a late fix older than it is compared with a
-        state that has seen newer fixes (the conservative late update)."""
-        return self._updated_ns
-
-    @property
     def odom(self) -> SE3:
         """``T_odom_base`` at :attr:`stamp_ns`."""
         return self._A
@@ -161,7 +155,7 @@ class MapOdomEstimator:
         """``(6, 6)`` right-tangent covariance of :attr:`T_map_odom`, ``[x, y, z, rx, ry, rz]``
         (planar: zero rows and columns for z, rx, ry)."""
         self.pose  # noqa: B018  (raises before initialization)
-        return self._embed(self._P[: self.dof, : self.dof])
+        return _embed(self.planar, self._P[: self.dof, : self.dof])
 
     @property
     def odometry_calibration(self) -> tuple[FloatArray, FloatArray] | None:
@@ -256,7 +250,7 @@ class MapOdomEstimator:
             X = correction
         X = self.drifted(X, motion)
         J = A3.inverse().adjoint()
-        cov = J @ self._embed(P) @ J.T
+        cov = J @ _embed(self.planar, P) @ J.T
         return PoseWithCovariance(
             stamp_ns, self.map_frame, self.base_frame, _lift(X) @ A3, 0.5 * (cov + cov.T)
         )
@@ -289,8 +283,9 @@ class MapOdomEstimator:
         self, cand: Candidate, innov: Innovation | None = None, *, newest: bool = True
     ) -> None:
         """Apply a full fix (:func:`~tagloc.localize.iekf.iterated_update`); ``innov``: its
-        :meth:`innovation` at the current state (computed if None). ``newest=False`` leaves
-        :attr:`updated_ns` as it is (the fixes of a restart after the first). Raises
+        :meth:`innovation` at the current state (computed if None). ``newest=False`` keeps the
+        stamp of the newest applied fix as it is (the fixes of a restart after the first;
+        a later late fix older than that stamp is updated conservatively). Raises
         ``LocalizeError`` before initialization or for a partial fix."""
         if cand.basis is not None:
             raise LocalizeError("update: a partial fix enters through update_partial")
@@ -317,13 +312,15 @@ class MapOdomEstimator:
         if newest:
             self._updated_ns = max(self._updated_ns, cand.stamp_ns)
 
-    def _embed(self, P: FloatArray) -> FloatArray:
-        if not self.planar:
-            return P.copy()
-        out = np.zeros((6, 6))
-        out[np.ix_(PLANAR_AXES, PLANAR_AXES)] = P
-        return out
-
 
 def _lift(X: Pose) -> SE3:
     return X.to_se3() if isinstance(X, SE2) else X
+
+
+def _embed(planar: bool, P: FloatArray) -> FloatArray:
+    """A pose covariance as ``(6, 6)`` ``[x, y, z, rx, ry, rz]`` (planar: zeros off the plane)."""
+    if not planar:
+        return P.copy()
+    out = np.zeros((6, 6))
+    out[np.ix_(PLANAR_AXES, PLANAR_AXES)] = P
+    return out
