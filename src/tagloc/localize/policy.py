@@ -1,22 +1,20 @@
 """``FixPolicy``: what the ``map -> odom`` estimator is given, and what is published.
 
 The estimator (:class:`~tagloc.localize.estimator.MapOdomEstimator`) applies whatever fix it is
-handed. The policy decides, for each fix, whether and how (:meth:`FixPolicy.decide`):
+handed; the policy decides for each fix (:meth:`FixPolicy.decide`), in order:
 
-1. quality gates: a fix with a high reprojection error (ambiguity, range) never reaches the
-   state or the published correction (:class:`~tagloc.localize.gating.QualityLimits`);
+1. quality: a fix past the reprojection, ambiguity or range limits never reaches the state or
+   the published correction (:class:`~tagloc.localize.gating.QualityLimits`);
 2. the odometry at the fix's own stamp (none buffered: ``NO_ODOMETRY``);
-3. start-up: with no state, fixes are held until ``k`` mutually consistent ones
-   (:class:`~tagloc.localize.gating.ConsistencyBuffer`) initialize it;
+3. start-up: fixes are held until ``k`` mutually consistent ones initialize the state;
 4. the state is predicted to the fix's stamp;
 5. a fix of a suspect source (a moved tag) is rejected; passing the gate counts toward clearing;
-6. a gap (no accepted fix for ``gap_ns`` or over ``gap_m``): fixes are held again until ``k``
-   consistent ones; if they all disagree with the stale state they re-initialize it, else they
-   are applied in order;
-7. the chi-square gate ``d2 <= chi2.ppf(q, dof)``: a gated fix feeds the suspect and kidnap
+6. after a gap (:class:`~tagloc.localize.recovery.GapRule`) fixes are held again until ``k``
+   consistent ones, which re-initialize the state if all disagree with it, else are applied;
+7. the chi-square gate ``d2 <= chi2.ppf(q, dof)``; a gated fix feeds the suspect and kidnap
    books (:class:`~tagloc.localize.recovery.RecoveryBooks`), which may flag its source or
    re-initialize the state from consistent gated fixes;
-8. the iterated update, then the publication, clipped to the cap and the speed limit
+8. the update, and the publication clipped to the cap and the speed limit
    (:class:`~tagloc.localize.publisher.CorrectionPublisher`); (re)initializations snap.
 
 A partial fix (:meth:`FixPolicy.decide_partial`) is gated on its own dof and applied; it cannot
