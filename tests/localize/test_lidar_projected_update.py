@@ -92,8 +92,9 @@ def test_gate_on_k_dof_and_no_state() -> None:
     event = flt.update_partial(far)
     assert event.kind is EventKind.GATED_CHI2
     assert event.threshold == pytest.approx(10.827566, rel=1e-5)  # chi2.ppf(0.999, 1)
-    empty = MapOdomFilter.from_config(LocalizerConfig(), TransformBuffer(window_ns=S))
-    empty._buffer.set_transform("odom", "base_link", 0, SE3.identity())
+    buffer = TransformBuffer(window_ns=S)
+    empty = MapOdomFilter.from_config(LocalizerConfig(), buffer)
+    buffer.set_transform("odom", "base_link", 0, SE3.identity())
     assert (
         empty.update_partial(PartialFix(0, SE3.identity(), basis, [[1e-4]], "lidar")).kind
         is EventKind.UNUSED_NO_STATE

@@ -16,6 +16,8 @@ from test_localize_sim import MS, Drive, S, make_filter, make_fix, square_path
 from tagloc.frames import TransformBuffer
 from tagloc.geometry import SE3, SO3
 from tagloc.localize import EventKind, LocalizerConfig, MapOdomFilter
+from tagloc.localize.candidate import Candidate
+from tagloc.localize.iekf import linearize
 from tagloc.localize.motion import CALIBRATION_PARAMETERS
 
 SCALE, TURN, BIAS = 0.04, 0.02, math.radians(0.3)  # over-read 4 %, turn 2 %, 0.3 deg/m
@@ -82,18 +84,23 @@ def test_calibration_columns_of_the_late_fix_jacobian_match_finite_differences()
     run(flt, drive, np.random.default_rng(2), 10.0)
     flt.predict(11 * S)
     fix = make_fix(drive, 10 * S + 500 * MS, None)  # 0.5 s older than the state
-    cand = flt._candidate(fix, buffer.lookup("odom", "base_link", fix.stamp_ns))
-    back = flt._back(cand)
-    assert back is not None and np.abs(back.M).max() > 0.1
-    innov = flt._innovation(cand, back)
-    c0, eps, dof = flt._c.copy(), 1e-7, flt.dof
+    est = flt.estimator
+    cand = Candidate.of_fix(fix, est.path.lookup(fix.stamp_ns), est.planar)
+    innov = est.innovation(cand)  # late: compared with the state moved back to its stamp
+    assert innov.M is not None and np.abs(innov.M).max() > 0.1
+    calibration = est.odometry_calibration
+    assert calibration is not None
+    c0, eps, dof = calibration[0], 1e-7, est.dof
     for j in range(len(c0)):
         nus = []
         for sgn in (1, -1):
             c = c0.copy()
             c[j] += sgn * eps
-            nus.append(flt._linearize(cand, flt._X, c, back.M)[0])
+            nus.append(linearize(cand, est.pose, c, innov.M)[0])
         np.testing.assert_allclose(innov.H[:, dof + j], -(nus[0] - nus[1]) / (2 * eps), atol=1e-6)
+    # and the innovation itself is the fix against the calibrated odometry's prediction
+    T_pred = est.T_map_base_at(fix.stamp_ns)
+    np.testing.assert_allclose(innov.nu, fix.T_map_base.minus(T_pred), atol=1e-9)
 
 
 def test_a_late_fix_with_calibration_matches_the_on_time_one() -> None:

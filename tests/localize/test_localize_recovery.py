@@ -140,16 +140,16 @@ def test_a_kidnap_with_one_tag_in_view_relocalizes_from_it_alone() -> None:
     assert kinds[n:] == [EventKind.ACCEPTED] * (len(kinds) - n)
     assert base_error(flt, drive, flt.stamp_ns)[0] < 0.1
     # with the one-tag rule off, the same sightings never re-localize (a second tag is needed)
-    rng, drive, _, off, t_kidnap = _kidnap_drive(13)
-    off = make_filter(off._buffer, kidnap={"n_fixes_one_source": 0})
+    rng, drive, buffer, _, t_kidnap = _kidnap_drive(13)
+    off = make_filter(buffer, kidnap={"n_fixes_one_source": 0})
     run_fixes(off, drive, rng, fix_stamps(drive, 10.0, stop_s=t_kidnap / S))
     run_fixes(off, drive, rng, stamps, sources=("tag:2",))
     assert off.events.count(EventKind.REINITIALIZED_KIDNAP) == 0
 
 
 def test_kidnap_detection_can_be_disabled() -> None:
-    rng, drive, _, flt, t_kidnap = _kidnap_drive(13)
-    flt_off = make_filter(flt._buffer, kidnap={"enabled": False})
+    rng, drive, buffer, _, t_kidnap = _kidnap_drive(13)
+    flt_off = make_filter(buffer, kidnap={"enabled": False})
     run_fixes(flt_off, drive, rng, fix_stamps(drive, 10.0, stop_s=t_kidnap / S + 5))
     assert flt_off.events.count(EventKind.REINITIALIZED_KIDNAP) == 0
     assert base_error(flt_off, drive, flt_off.stamp_ns)[0] > 3.0

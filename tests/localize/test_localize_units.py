@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import numpy.typing as npt
 import pytest
 from test_localize_sim import FIX_COV, S, make_filter
 
@@ -27,6 +28,7 @@ from tagloc.localize import (
     LocalizeError,
     LocalizerConfig,
     MapOdomFilter,
+    ProcessNoise,
     QualityLimits,
     TagFix,
     chi2_threshold,
@@ -34,7 +36,9 @@ from tagloc.localize import (
     planar_projection_jacobian,
     save_localizer_config,
 )
-from tagloc.localize import filter as filter_module
+from tagloc.localize._series import jr as series_jr
+from tagloc.localize._series import jr_inv as series_jr_inv
+from tagloc.localize.candidate import Candidate
 
 # ----- localizer.yaml ----------------------------------------------------------------------
 
@@ -89,9 +93,10 @@ def test_from_config_unpacks_units() -> None:
     )
     flt = MapOdomFilter.from_config(config, TransformBuffer())
     assert flt.dof == 3 and flt.threshold == pytest.approx(11.3449, abs=1e-4)
-    assert flt._cap.max_rotation_rad == pytest.approx(math.radians(5.0))
-    assert flt._noise.step_ns == S // 10
-    np.testing.assert_allclose(flt._noise.var_per_m, np.square([0.05, 0.05, 0.02]))
+    assert flt.policy.cap.max_rotation_rad == pytest.approx(math.radians(5.0))
+    noise = flt.estimator.path.noise
+    assert noise.step_ns == S // 10
+    np.testing.assert_allclose(noise.var_per_m, np.square([0.05, 0.05, 0.02]))
 
 
 def test_chi2_thresholds() -> None:
@@ -159,8 +164,8 @@ def test_jacobian_series_match_the_closed_forms(scale: float) -> None:
         (scale * rng.standard_normal(6), se3_right_jacobian, se3_right_jacobian_inv),
         (scale * rng.standard_normal(3), se2_right_jacobian, se2_right_jacobian_inv),
     ):
-        np.testing.assert_allclose(filter_module._jr(tau), jr(tau), atol=1e-7)
-        np.testing.assert_allclose(filter_module._jr_inv(tau), jr_inv(tau), atol=1e-7)
+        np.testing.assert_allclose(series_jr(tau), jr(tau), atol=1e-7)
+        np.testing.assert_allclose(series_jr_inv(tau), jr_inv(tau), atol=1e-7)
 
 
 @pytest.mark.parametrize("planar", [False, True])
@@ -173,9 +178,9 @@ def test_measurement_jacobian_matches_finite_differences(planar: bool) -> None:
     X = SE3.random(rng, translation_scale=2.0)
     flt.initialize(0, X, np.eye(6) * 0.1)
     z = X @ odom @ SE3.exp(0.3 * rng.standard_normal(6))
-    cand = flt._candidate(_fix(T_map_base=z, stamp_ns=0), odom)
-    innov = flt._innovation(cand, None)
-    X0, eps = flt._X, 1e-6
+    cand = Candidate.of_fix(_fix(T_map_base=z, stamp_ns=0), odom, planar)
+    innov = flt.estimator.innovation(cand)
+    X0, eps = flt.estimator.pose, 1e-6
     numeric = np.zeros((flt.dof, flt.dof))
     for i in range(flt.dof):
         d = np.zeros(flt.dof)
@@ -253,7 +258,7 @@ def test_process_noise_one_increment_equals_the_path_integral(planar: bool) -> N
     rng = np.random.default_rng(3)
     A0, A1 = SE3.random(rng, translation_scale=3.0), SE3.random(rng, translation_scale=3.0)
     axes = [0, 1, 5] if planar else list(range(6))
-    noise = filter_module.ProcessNoise(
+    noise = ProcessNoise(
         rng.uniform(0.1, 1, 6)[axes],
         rng.uniform(0.1, 1, 6)[axes],
         rng.uniform(0.1, 1, 6)[axes],
@@ -281,21 +286,44 @@ def test_process_noise_one_increment_equals_the_path_integral(planar: bool) -> N
         assert bare.M.shape == (len(axes), 0)
 
 
+class _CountingBuffer(TransformBuffer):
+    """A buffer that records the odometry paths asked of it (``lookup_many``: one call per
+    integrated path) and the single lookups."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.paths: list[tuple[int, int]] = []
+        self.lookups: list[int] = []
+
+    def lookup_many(self, target: str, source: str, stamps_ns: npt.ArrayLike) -> SE3:
+        stamps = np.asarray(stamps_ns)
+        self.paths.append((int(stamps[0]), int(stamps[-1])))
+        return super().lookup_many(target, source, stamps_ns)
+
+    def lookup(self, target: str, source: str, stamp_ns: int | np.integer) -> SE3:
+        self.lookups.append(int(stamp_ns))
+        return super().lookup(target, source, stamp_ns)
+
+
+def _inner(lo: int, hi: int, step: int = S // 10) -> tuple[int, int]:
+    """First and last inner sample of the path ``lo..hi`` integrated in ``step`` steps."""
+    n = math.ceil((hi - lo) / step)
+    return lo + round(1 * ((hi - lo) / n)), lo + round((n - 1) * ((hi - lo) / n))
+
+
 def test_a_frames_prior_and_its_fix_share_one_path_and_the_state_revision_counts() -> None:
-    buffer = TransformBuffer()
+    buffer = _CountingBuffer()
     stamps = np.arange(0, 3 * S, S // 100)
     poses = SE3.from_rotvec(np.zeros((len(stamps), 3)), np.outer(stamps / S, [1.0, 0, 0]))
     buffer.set_transforms("odom", "base_link", stamps, poses)
     flt = make_filter(buffer, calibration={"enabled": True})
     flt.initialize(0, SE3.identity(), np.eye(6) * 1e-2)
     revision = flt.revision
-    calls = []
-    integrate = flt._integrate
-    flt._integrate = lambda *args: calls.append(args[:2]) or integrate(*args)  # type: ignore[method-assign]
+    buffer.paths.clear()
     T = flt.T_map_base_at(S // 2)  # a frame's prior, then its fix: one integration
     assert flt.revision == revision  # a prior does not change the state
     event = flt.update(TagFix(S // 2, T, FIX_COV, "tag:1", FixQuality(reproj_err_px=0.4)))
-    assert event.kind is EventKind.ACCEPTED and calls == [(0, S // 2)]
+    assert event.kind is EventKind.ACCEPTED and buffer.paths == [_inner(0, S // 2)]
     assert flt.revision == revision + 2  # the prediction, then the update
     flt.predict(S // 2 + S // 1000)  # less than a motion step: the state stays
     assert flt.revision == revision + 2
@@ -306,17 +334,19 @@ def test_a_frames_prior_and_its_fix_share_one_path_and_the_state_revision_counts
     # a changed buffer integrates again
     buffer.set_transform("odom", "base_link", 3 * S, SE3.from_rotvec([0, 0, 0], [3.0, 0, 0]))
     flt.pose_at(2 * S)
-    assert calls[1:] == [(S // 2, S), (S, 2 * S), (S, 2 * S)]
+    assert buffer.paths[1:] == [_inner(S // 2, S), _inner(S, 2 * S), _inner(S, 2 * S)]
 
 
 def test_odometry_lookups_are_reused_only_while_the_buffer_is_unchanged() -> None:
-    buffer = TransformBuffer()
+    buffer = _CountingBuffer()
     buffer.set_transforms("odom", "base_link", np.array([0, 2 * S]), SE3.identity(2))
-    flt = make_filter(buffer)
+    path = make_filter(buffer).estimator.path
     revision = buffer.revision
-    first = flt._lookup(S)
-    assert flt._lookup(S) is first and buffer.revision == revision
+    first = path.lookup(S)
+    assert path.lookup(S) is first and buffer.revision == revision
+    assert buffer.lookups == [S]  # asked of the buffer once
     # a late sample between the two changes the interpolation at 1 s: looked up again
     buffer.set_transform("odom", "base_link", S, SE3.from_rotvec([0, 0, 0], [1.0, 0, 0]))
     assert buffer.revision == revision + 1
-    np.testing.assert_allclose(flt._lookup(S).translation, [1.0, 0.0, 0.0])
+    np.testing.assert_allclose(path.lookup(S).translation, [1.0, 0.0, 0.0])
+    assert buffer.lookups == [S, S]

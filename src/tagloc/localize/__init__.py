@@ -8,7 +8,13 @@ rz]``) and the odometry ``odom -> base`` in a :class:`~tagloc.frames.TransformBu
 publishes it so that the odometry chain never jumps. Every decision is a :class:`FilterEvent` in
 its :class:`EventLog`. Tunables live in ``localizer.yaml`` (:class:`LocalizerConfig`).
 
-Policies
+It composes two parts, each usable alone: the estimator (:class:`MapOdomEstimator`: the state,
+its covariance, the odometry path integral and the iterated EKF; ``predict``, ``innovation``,
+``update``, ``update_partial``) and the fix policy (:class:`FixPolicy`: what the estimator is
+given, and the capped publication; ``decide``, ``decide_partial``), with the suspect-source and
+kidnap books of :class:`RecoveryBooks`. A fix as the estimator uses it is a :class:`Candidate`.
+
+Policies (:class:`FixPolicy`)
     - No prior at start-up: the first ``k`` mutually consistent fixes initialize the state.
     - Chi-square gate on the innovation's Mahalanobis distance (dof 6, planar 3).
     - A fix with a high reprojection error is never used.
@@ -20,7 +26,9 @@ Policies
       its fixes rejected.
 """
 
+from tagloc.localize.candidate import Candidate
 from tagloc.localize.config import LocalizerConfig, load_localizer_config, save_localizer_config
+from tagloc.localize.estimator import MapOdomEstimator
 from tagloc.localize.events import EventKind, EventLog, FilterEvent
 from tagloc.localize.fiducial import FiducialConfig, FiducialFixSource, FrameFixes
 from tagloc.localize.filter import MapOdomFilter
@@ -40,7 +48,9 @@ from tagloc.localize.gating import (
     SourceMonitor,
     chi2_threshold,
 )
-from tagloc.localize.motion import ProcessNoise
+from tagloc.localize.iekf import Innovation
+from tagloc.localize.motion import CalibrationModel, PathMotion, ProcessNoise
+from tagloc.localize.odometry_path import OdometryPath
 from tagloc.localize.pipeline import (
     FrameTruth,
     LocalizationPipeline,
@@ -48,10 +58,14 @@ from tagloc.localize.pipeline import (
     PipelineTopics,
     localize,
 )
+from tagloc.localize.policy import FixPolicy
+from tagloc.localize.recovery import KidnapRule, RecoveryBooks, SuspectRule
 from tagloc.localize.run import CameraFrameRecord, FixAttempt, LocalizationRun
 
 __all__ = [
+    "CalibrationModel",
     "CameraFrameRecord",
+    "Candidate",
     "ConsistencyBuffer",
     "CorrectionCap",
     "CorrectionUpdate",
@@ -61,21 +75,29 @@ __all__ = [
     "FiducialFixSource",
     "FilterEvent",
     "FixAttempt",
+    "FixPolicy",
     "FixQuality",
     "FrameFixes",
     "FrameTruth",
+    "Innovation",
+    "KidnapRule",
     "LocalizationPipeline",
     "LocalizationRun",
     "LocalizeError",
     "LocalizerConfig",
+    "MapOdomEstimator",
     "MapOdomFilter",
+    "OdometryPath",
     "PartialFix",
+    "PathMotion",
     "PipelineInputError",
     "PipelineTopics",
     "PoseWithCovariance",
     "ProcessNoise",
     "QualityLimits",
+    "RecoveryBooks",
     "SourceMonitor",
+    "SuspectRule",
     "TagFix",
     "chi2_threshold",
     "load_localizer_config",

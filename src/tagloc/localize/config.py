@@ -11,7 +11,8 @@ Loaded like every tagloc file (:mod:`tagloc.config`): unknown keys, NaN and wron
 :class:`~tagloc.errors.ConfigError` line naming the file and the field path, e.g.
 ``localizer.yaml: gates.chi2_quantile: input should be less than 1``. Every section may be left
 out (its defaults apply). The algorithms never see this model: :meth:`MapOdomFilter.from_config
-<tagloc.localize.filter.MapOdomFilter.from_config>` unpacks it into plain arguments.
+<tagloc.localize.filter.MapOdomFilter.from_config>` hands its sections to the estimator's and
+the fix policy's ``from_config``, which unpack them into plain arguments.
 
 Units: metres, radians, seconds (converted to integer nanoseconds by the factory); the one angle
 humans type, the per-update cap, is in degrees as its name says.

@@ -11,6 +11,10 @@
 - :class:`SourceMonitor`: per-source innovation statistics; flags a source (a moved tag) whose
   fixes are repeatedly gated while other sources are accepted.
 - :class:`CorrectionCap`: clip the jump of the published correction per update.
+
+:class:`~tagloc.localize.candidate.Candidate` (a fix as the estimator uses it) and the pairwise
+test :func:`~tagloc.localize.candidate.pair_d2` live in :mod:`tagloc.localize.candidate` and are
+re-exported here.
 """
 
 from __future__ import annotations
@@ -24,31 +28,19 @@ import numpy as np
 from scipy.stats import chi2
 
 from tagloc.geometry import SE2, SE3, SO3
+from tagloc.localize.candidate import Candidate, Pose, mahalanobis_sq, pair_d2
 from tagloc.localize.events import EventKind
-from tagloc.localize.fix import FixQuality, FloatArray, PartialFix, TagFix
+from tagloc.localize.fix import FixQuality, FloatArray
 
-Pose = SE3 | SE2
-
+__all__ = [
+    "Candidate", "ConsistencyBuffer", "CorrectionCap", "PairNoise", "Pose", "QualityLimits",
+    "SourceMonitor", "SourceStats", "chi2_threshold", "mahalanobis_sq", "pair_d2",
+]  # fmt: skip
 
 @functools.lru_cache(maxsize=64)
 def chi2_threshold(quantile: float, dof: int) -> float:
     """``chi2.ppf(quantile, dof)``: the gate on a squared Mahalanobis distance of ``dof``."""
     return float(chi2.ppf(quantile, dof))
-
-
-def pair_d2(a: Candidate, b: Candidate, Q_ab: FloatArray) -> float:
-    """Squared Mahalanobis distance between the corrections two fixes imply (``Q_ab``: the
-    random walk between their stamps); the pairwise test of :class:`ConsistencyBuffer`."""
-    if a.stamp_ns > b.stamp_ns:
-        a, b = b, a
-    e, J_e_b, J_e_a = b.T_map_odom.minus(a.T_map_odom, jacobians=True)  # type: ignore[call-overload]
-    S = J_e_a @ a.cov @ J_e_a.T + J_e_b @ b.cov @ J_e_b.T + Q_ab
-    return mahalanobis_sq(e, S)
-
-
-def mahalanobis_sq(nu: FloatArray, S: FloatArray) -> float:
-    """``nu^T S^-1 nu`` for an innovation ``nu (d,)`` with covariance ``S (d, d)``."""
-    return float(nu @ np.linalg.solve(S, nu))
 
 
 @dataclass(frozen=True, slots=True)
@@ -73,61 +65,6 @@ class QualityLimits:
         if max_rng is not None and rng > max_rng:
             return EventKind.GATED_QUALITY, rng, max_rng, f"range {rng:.3g} m"
         return None
-
-
-@dataclass(frozen=True, eq=False)
-class Candidate:
-    """A fix with what the filter derived from it (the derived values computed on first use).
-
-    Attributes
-    ----------
-    fix : TagFix
-    odom : SE3
-        ``T_odom_base`` at the fix's stamp.
-    A : SE3 or SE2
-        The same as the filter uses it (its planar projection in planar mode).
-    z, R : SE3 or SE2, (d, d) float
-        The measurement and its covariance as the filter uses them (projected in planar mode);
-        for a partial fix ``R`` is ``(k, k)``, the covariance along ``basis``.
-    basis : (d, k) float, optional
-        A partial fix's measured directions in the filter's tangent (None: all of them).
-    """
-
-    fix: TagFix | PartialFix
-    odom: SE3
-    A: Pose
-    z: Pose
-    R: FloatArray
-    basis: FloatArray | None = None
-
-    @property
-    def stamp_ns(self) -> int:
-        return self.fix.stamp_ns
-
-    @functools.cached_property
-    def Ad_A_inv(self) -> FloatArray:
-        """``Ad(A^-1)``: a right perturbation of ``T_map_odom`` seen at the base."""
-        A = self.A
-        if isinstance(A, SE2):
-            return A.inverse().adjoint()
-        Rt = A.rotation.matrix.T  # Ad(A^-1) = [[R^T, -R^T [t]x], [0, R^T]]
-        x, y, z = A.translation.tolist()
-        out = np.zeros((6, 6))
-        out[:3, :3] = out[3:, 3:] = Rt
-        out[:3, 3:] = Rt @ np.array([[0.0, z, -y], [-z, 0.0, x], [y, -x, 0.0]])
-        return out
-
-    @functools.cached_property
-    def T_map_odom(self) -> Pose:
-        """The correction the fix implies, ``z @ A^-1``."""
-        return self.z @ self.A.inverse()  # type: ignore[operator]
-
-    @functools.cached_property
-    def cov(self) -> FloatArray:
-        """Right-tangent covariance of :attr:`T_map_odom`: ``Ad(A) R Ad(A)^T``."""
-        Ad = self.A.adjoint()
-        out: FloatArray = Ad @ self.R @ Ad.T
-        return out
 
 
 #: ``Q_ij``: random-walk covariance between two candidates (right tangent of the later one).

@@ -26,9 +26,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
+
+if TYPE_CHECKING:
+    from tagloc.localize.config import CalibrationConfig, ProcessNoiseConfig
 
 FloatArray = npt.NDArray[np.float64]
 S_NS = 1_000_000_000
@@ -127,6 +131,20 @@ class ProcessNoise:
     var_per_s: FloatArray
     step_ns: int
 
+    @classmethod
+    def from_config(cls, section: ProcessNoiseConfig, planar: bool) -> ProcessNoise:
+        """From ``localizer.yaml``'s ``process_noise`` (standard deviations become variances,
+        the step nanoseconds; planar: the ``x, y, rz`` axes)."""
+        axes = [0, 1, 5] if planar else list(range(6))
+
+        def var(sigmas: tuple[float, ...]) -> FloatArray:
+            return np.square(np.asarray(sigmas, dtype=np.float64))[axes]
+
+        return cls(
+            var(section.sigma_per_sqrt_m), var(section.sigma_per_sqrt_rad),
+            var(section.sigma_per_sqrt_s), round(section.motion_step_s * S_NS),
+        )  # fmt: skip
+
     def path(
         self, stamps_ns: npt.NDArray[np.int64], R: FloatArray, t: FloatArray, planar: bool,
         drift: bool = True,
@@ -209,3 +227,16 @@ class CalibrationModel:
     prior_var: FloatArray
     var_per_m: FloatArray
     max_abs: FloatArray
+
+    @classmethod
+    def from_config(cls, section: CalibrationConfig) -> CalibrationModel | None:
+        """From ``localizer.yaml``'s ``calibration`` (None when disabled; standard deviations
+        become variances, ``yaw_per_m`` degrees radians)."""
+        if not section.enabled:
+            return None
+        deg = np.array([1.0, 1.0, math.pi / 180.0, 1.0])  # yaw_per_m is in degrees
+        return cls(
+            np.square(np.asarray(section.prior_sigma) * deg),
+            np.square(np.asarray(section.sigma_per_sqrt_m) * deg),
+            np.asarray(section.max_abs) * deg,
+        )

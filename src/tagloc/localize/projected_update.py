@@ -5,8 +5,10 @@ A :class:`~tagloc.localize.fix.PartialFix` (a lidar scan match in a corridor, sa
 right tangent ``[x, y, z, rx, ry, rz]``: ``y = B^T Log(T_pred^-1 T_fix)`` with covariance
 ``C (k, k)``; nothing is said about the other directions (``N``, the orthogonal complement).
 
-The update (:meth:`MapOdomFilter.update_partial <tagloc.localize.filter.MapOdomFilter.
-update_partial>`) is the filter's iterated EKF on the ``k``-dimensional measurement
+The update (:meth:`MapOdomEstimator.update_partial <tagloc.localize.estimator.
+MapOdomEstimator.update_partial>`, gated by :meth:`FixPolicy.decide_partial
+<tagloc.localize.policy.FixPolicy.decide_partial>`) is the estimator's iterated EKF
+(:func:`~tagloc.localize.iekf.iterated_update`) on the ``k``-dimensional measurement
 ``(B^T nu, B^T H, C)``, gated on ``chi2.ppf(q, k)``. With the prior's cross-correlations the
 optimal gain would also move the estimate along ``N`` (a y-innovation pulling x through a
 correlated prior). It must not: an unconstrained direction has not been measured. So the gain
