@@ -205,7 +205,7 @@ def _estimators_table(s: EvalSummary) -> str:
             r.fraction if r else None, f"{r.n_success} / {r.n_opportunities}" if r else None,
         ])  # fmt: skip
     note = (
-        "<p>ATE: evo APE, translation part, unaligned (odom = map at the start). Reliability: "
+        "<p>ATE: APE, translation part, unaligned (odom = map at the start). Reliability: "
         f"camera frames with a tag truly in view within {s.config.opportunity_range_m:g} m "
         "where a fix was accepted and the published pose right after is within "
         f"{s.config.position_tol_m * 100:g} cm / {s.config.rotation_tol_deg:g} deg of truth. "
