@@ -21,6 +21,7 @@ import pytest
 
 from tagloc.eval import write_report
 from tagloc.geometry import SE3
+from tagloc.io import write_tum
 from tagloc.localize.run import FixAttempt, LocalizationRun
 
 EVO_APE = Path(sys.executable).with_name("evo_ape")
@@ -79,7 +80,7 @@ def _evo_ape(out: Path, estimate: str, tmp_home: Path) -> tuple[float, float]:
 @pytest.mark.skipif(not EVO_APE.exists(), reason="evo_ape console script not installed")
 def test_report_ate_equals_evo_ape_cli(tmp_path: Path) -> None:
     out = tmp_path / "report"
-    summary = write_report(_run(), out)
+    summary = write_report(_run(), out, write_trajectory=write_tum)
     data = json.loads((out / "summary.json").read_text())
     for name in ("fused", "odometry", "baseline"):
         ours = data["estimators"][name]["ate_rmse_m"]
@@ -93,7 +94,6 @@ def test_report_ate_equals_evo_ape_cli(tmp_path: Path) -> None:
 def test_files_comparison_associates_like_evo_ape(tmp_path: Path) -> None:
     # an estimate on every 3rd stamp, 2 ms late: association by nearest stamp within 10 ms
     from tagloc.eval.compare import compare_trajectories
-    from tagloc.io import write_tum
 
     run = _run()
     assert run.T_map_base_truth is not None

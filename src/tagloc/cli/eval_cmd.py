@@ -63,6 +63,7 @@ def eval_run(
     from tagloc.eval import EvalConfig, write_report
     from tagloc.eval.report import REPORT_FILES
     from tagloc.fileutil import check_outputs
+    from tagloc.io import write_tum
     from tagloc.sim.scenarios import run_scenario
 
     check_outputs({"--out": out}, directories={"--out": REPORT_FILES})
@@ -72,7 +73,7 @@ def eval_run(
         rotation_tol_deg=rotation_deg,
     )
     run = run_scenario(scenario, seed=seed, duration_s=duration, lidar=lidar)
-    summary = write_report(run, out, config=config)
+    summary = write_report(run, out, write_trajectory=write_tum, config=config)
     print_summary(summary)
     typer.echo(f"wrote report.html, summary.json and TUM files to {out}")
     if strict and not summary.passed:

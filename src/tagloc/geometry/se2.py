@@ -91,6 +91,17 @@ class SE2(LieGroup):
         return cls._make(np.zeros((*shape, 2)), np.zeros(shape))
 
     @classmethod
+    def from_se3(cls, T: SE3) -> SE2:
+        """Planar projection ``(x, y, yaw)`` of an SE(3) pose or batch,
+        ``yaw = atan2(R[1, 0], R[0, 0])``.
+
+        Drops z, roll and pitch (yaw as in a ZYX Euler decomposition).
+        """
+        matrix = T.rotation.matrix
+        yaw = np.arctan2(matrix[..., 1, 0], matrix[..., 0, 0])
+        return cls._make(T.translation[..., :2].copy(), np.asarray(yaw, dtype=np.float64))
+
+    @classmethod
     def from_matrix(cls, matrix: npt.ArrayLike) -> SE2:
         """From homogeneous ``(3, 3)`` or ``(N, 3, 3)`` matrices.
 
