@@ -1,10 +1,11 @@
 """The package layers of DESIGN.md: each imports only from the layers above it.
 
-Order (top first): errors, fileutil, _yaml_loader, config; geometry; frames; camera; tags;
-messages; lidar; mapping; supervise; localize; sim; eval; io; adapters; cli. ``supervise`` sits
-above ``localize``: the supervisor's health and ladder policy are generic over fix sources, and the
-streaming node in ``localize`` drives it. Imports under ``if TYPE_CHECKING:`` count too (they
-are real coupling), and so do imports inside functions. No exception is listed.
+Order (top first): errors, fileutil, _yaml_loader, config, _types, units; geometry; frames;
+camera; tags; messages; lidar; mapping; supervise; localize; sim; eval; io; adapters; cli.
+``supervise`` sits above ``localize``: the supervisor's health and ladder policy are generic over
+fix sources, and the streaming node in ``localize`` drives it. Imports under
+``if TYPE_CHECKING:`` count too (they are real coupling), and so do imports inside functions. No
+exception is listed.
 
 No module imports itself through others (an import cycle), within a package too: the same
 imports, resolved to modules (``from tagloc.geometry import se3`` is the module ``se3``,
@@ -21,8 +22,8 @@ import pytest
 
 SRC = Path(__file__).resolve().parents[2] / "src" / "tagloc"
 ORDER = [
-    ("errors", "fileutil", "_yaml_loader", "config"), ("geometry",), ("frames",), ("camera",),
-    ("tags",),
+    ("errors", "fileutil", "_yaml_loader", "config", "_types", "units"), ("geometry",),
+    ("frames",), ("camera",), ("tags",),
     ("messages",), ("lidar",), ("mapping",), ("supervise",), ("localize",), ("sim",), ("eval",),
     ("io",), ("adapters",), ("cli",),
 ]  # fmt: skip

@@ -29,10 +29,9 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.eval.errors import EvaluationError
 from tagloc.geometry import SE3, SO3
-
-FloatArray = npt.NDArray[np.float64]
 
 #: Singular values of ``Sigma_xy`` below this fraction of the largest count as zero.
 RANK_RTOL = 1e-12

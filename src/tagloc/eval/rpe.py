@@ -30,10 +30,10 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.eval.errors import EvaluationError
 from tagloc.geometry import SE3
 
-FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 
 

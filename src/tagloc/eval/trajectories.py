@@ -19,13 +19,12 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.eval.errors import EvaluationError
 from tagloc.eval.rpe import RelativeError, relative_pose_error
 from tagloc.geometry import SE3
 from tagloc.localize.baseline import BaselineRun, naive_snap_baseline
 from tagloc.localize.run import LocalizationRun
-
-FloatArray = npt.NDArray[np.float64]
 
 __all__ = [
     "SNAP_EVENT_KINDS",

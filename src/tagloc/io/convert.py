@@ -41,11 +41,11 @@ from typing import Any, Literal, NamedTuple
 import cv2
 import numpy as np
 
+from tagloc._types import FloatArray
 from tagloc.geometry import SE3
 from tagloc.io.errors import BagFormatError
 from tagloc.messages import (
     CameraInfoMsg,
-    FloatArray,
     GroundTruthMsg,
     ImageMsg,
     Message,

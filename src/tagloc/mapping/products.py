@@ -18,17 +18,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict, Field
 
+from tagloc._types import FloatArray
 from tagloc.geometry import SE3
 from tagloc.lidar import OccupancyConfig, OccupancyGrid, build_occupancy, build_premap
 from tagloc.mapping.lidar_config import LidarSurveyConfig
 from tagloc.mapping.lidar_survey import deskewed_points
 from tagloc.mapping.report import BuildReport
 from tagloc.mapping.survey import MappingError, Survey
-
-FloatArray = npt.NDArray[np.float64]
 
 
 class ProductsConfig(BaseModel):

@@ -38,6 +38,7 @@ import numpy as np
 import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict, Field
 
+from tagloc._types import FloatArray
 from tagloc.camera import CameraModel
 from tagloc.geometry import SE3
 from tagloc.sim.drive import Drive
@@ -52,7 +53,6 @@ __all__ = [
     "visible_tags",
 ]
 
-FloatArray = npt.NDArray[np.float64]
 
 #: Ground truth is sampled for this many frames at a time.
 _CHUNK = 256

@@ -27,13 +27,11 @@ from dataclasses import dataclass, replace
 from typing import Annotated, Literal
 
 import numpy as np
-from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
 
+from tagloc._types import FloatArray
 from tagloc.geometry import SE3
 from tagloc.sim.trajectory import se3_from_xy_yaw
-
-FloatArray = NDArray[np.float64]
 
 
 class _DriftConfig(BaseModel):

@@ -10,12 +10,11 @@ from collections.abc import Mapping
 from typing import Annotated, Any
 
 import numpy as np
-from numpy.typing import NDArray
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
 
+from tagloc._types import FloatArray
 from tagloc.config import short_repr
 
-FloatArray = NDArray[np.float64]
 #: Largest coordinate of a world, metres (a building, not a planet).
 MAX_COORDINATE_M = 1e5
 #: Longest dwell at a waypoint, seconds.

@@ -46,10 +46,9 @@ import numpy as np
 import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict, Field
 
+from tagloc._types import FloatArray
 from tagloc.geometry import SE3, cov_compose, cov_inverse, se3_right_jacobian_inv
 from tagloc.geometry.small_batch import row_norms
-
-FloatArray = npt.NDArray[np.float64]
 
 _EPS = np.zeros((3, 3, 3))
 _EPS[0, 1, 2] = _EPS[1, 2, 0] = _EPS[2, 0, 1] = 1.0
