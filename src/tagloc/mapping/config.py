@@ -4,13 +4,14 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
+from tagloc.config import StrictModel
 from tagloc.mapping.lidar_config import LidarSurveyConfig
 from tagloc.tags.covariance import NoiseModel
 
 
-class OdometryNoise(BaseModel):
+class OdometryNoise(StrictModel):
     """Noise of the odometry between two keyframes: a random walk in distance and rotation.
 
     Per axis, ``var = per_m * d + per_rad * a + floor^2`` with ``d`` the distance (m) and ``a``
@@ -26,8 +27,6 @@ class OdometryNoise(BaseModel):
     legged drives that beat these defaults, 7.6 cm tag RMS against 9.8 cm.
     """
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
     translation_var_per_m: float = Field(4e-3, ge=0.0, description="m^2 per metre")
     translation_var_per_rad: float = Field(1e-4, ge=0.0, description="m^2 per radian")
     rotation_var_per_m: float = Field(4e-4, ge=0.0, description="rad^2 per metre")
@@ -39,7 +38,7 @@ class OdometryNoise(BaseModel):
     rotation_floor_rad: float = Field(1e-4, gt=0.0)
 
 
-class GravityConfig(BaseModel):
+class GravityConfig(StrictModel):
     """Roll and pitch priors from a gravity-aligned odometry (:mod:`tagloc.mapping.gravity`).
 
     Attributes
@@ -54,13 +53,11 @@ class GravityConfig(BaseModel):
         independent).
     """
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
     aligned_odometry: bool = False
     sigma_deg: float = Field(1.0, gt=0.0, le=45.0)
 
 
-class MapBuildConfig(BaseModel):
+class MapBuildConfig(StrictModel):
     """How :func:`tagloc.mapping.build_tag_map` turns a survey into a tag map.
 
     Attributes
@@ -132,8 +129,6 @@ class MapBuildConfig(BaseModel):
     lidar : LidarSurveyConfig
         Scan-matching factors and map products of a survey with lidar sweeps.
     """
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
     odometry: OdometryNoise = OdometryNoise()
     pnp_noise: NoiseModel = NoiseModel()
