@@ -22,7 +22,7 @@ from pathlib import Path
 import gtsam
 import numpy as np
 
-from tagloc.geometry import SE3
+from tagloc.geometry import SE3, inverse_h
 from tagloc.mapping import MapBuildConfig
 from tagloc.mapping.graph import (
     GraphInput,
@@ -31,7 +31,6 @@ from tagloc.mapping.graph import (
     marginal_covariances,
     solve_graph,
 )
-from tagloc.mapping.initialize import inverse_h
 
 DUPONT = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "dupont"
 

@@ -29,6 +29,7 @@ from typing import Any, Protocol, Self, TypeAlias, get_args
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.errors import RecordError
 from tagloc.geometry import SE3
 from tagloc.tags.detection import TagDetection
@@ -49,7 +50,6 @@ __all__ = [
     "TransformMsg",
 ]
 
-FloatArray: TypeAlias = npt.NDArray[np.float64]
 UInt8Array: TypeAlias = npt.NDArray[np.uint8]
 
 _INFO_KEYS = {"d": "D", "k": "K", "r": "R", "p": "P"}

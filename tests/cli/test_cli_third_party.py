@@ -1,4 +1,5 @@
-"""What evo, GTSAM and the simulator cannot do reaches the user as one line; nothing is written."""
+"""What alignment, GTSAM and the simulator cannot do reaches the user as one line; nothing is
+written."""
 
 from __future__ import annotations
 

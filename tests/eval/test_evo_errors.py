@@ -1,4 +1,4 @@
-"""evo's exceptions (a degenerate alignment, a bad RPE spacing) become EvaluationErrors."""
+"""Degenerate alignments and bad RPE spacings are one EvaluationError each."""
 
 from __future__ import annotations
 

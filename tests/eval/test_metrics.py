@@ -1,4 +1,4 @@
-"""ATE through evo checked against an independent numpy computation (and Umeyama's closed form)."""
+"""ATE checked against an independent numpy computation (and Umeyama's closed form)."""
 
 from __future__ import annotations
 

@@ -14,7 +14,7 @@ from tagloc.eval import EvalConfig, write_report
 from tagloc.eval.metrics import EvaluationError
 from tagloc.eval.summary import SUMMARY_SCHEMA_VERSION
 from tagloc.geometry import SE3
-from tagloc.io import read_tum
+from tagloc.io import read_tum, write_tum
 from tagloc.localize.events import EventKind, FilterEvent
 from tagloc.localize.run import CameraFrameRecord, FixAttempt, LocalizationRun
 
@@ -69,7 +69,7 @@ def synthetic_run(seed: int = 3) -> LocalizationRun:
 def written(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, LocalizationRun, object]:
     out = tmp_path_factory.mktemp("report")
     run = synthetic_run()
-    summary = write_report(run, out)
+    summary = write_report(run, out, write_trajectory=write_tum)
     return out, run, summary
 
 
@@ -132,7 +132,8 @@ def test_report_html_is_self_contained(written: tuple[Path, LocalizationRun, obj
 
 
 def test_config_changes_the_protocol(tmp_path: Path) -> None:
-    summary = write_report(synthetic_run(), tmp_path, config=EvalConfig(position_tol_m=0.2))
+    summary = write_report(synthetic_run(), tmp_path, config=EvalConfig(position_tol_m=0.2),
+                           write_trajectory=write_tum)
     fused = summary.estimators["fused"]
     assert fused.reliability is not None and fused.reliability.position_tol_m == 0.2
     assert json.loads((tmp_path / "summary.json").read_text())["config"]["position_tol_m"] == 0.2
@@ -141,7 +142,7 @@ def test_config_changes_the_protocol(tmp_path: Path) -> None:
 def test_run_without_truth(tmp_path: Path) -> None:
     run = synthetic_run()
     run.T_map_base_truth = None
-    summary = write_report(run, tmp_path)
+    summary = write_report(run, tmp_path, write_trajectory=write_tum)
     assert not summary.has_truth and math.isnan(summary.estimators["fused"].ate_rmse_m)
     assert all(c.passed is None for c in summary.checks if "ATE" in c.name)
     data = json.loads((tmp_path / "summary.json").read_text())
@@ -158,14 +159,14 @@ def test_nan_pose_is_an_evaluation_error(tmp_path: Path) -> None:
     run.stamps_ns = run.stamps_ns.copy()
     run.stamps_ns[5] = run.stamps_ns[4]
     with pytest.raises(EvaluationError):
-        write_report(run, tmp_path)
+        write_report(run, tmp_path, write_trajectory=write_tum)
     assert not (tmp_path / "summary.json").exists()
 
 
 def test_kidnap_run_keeps_the_ate_check_by_name_unjudged(tmp_path: Path) -> None:
     run = synthetic_run()
     run.kidnaps_ns = [int(run.stamps_ns[1000])]
-    summary = write_report(run, tmp_path)
+    summary = write_report(run, tmp_path, write_trajectory=write_tum)
     checks = {c["name"]: c for c in json.loads((tmp_path / "summary.json").read_text())["checks"]}
     ate = checks["fused ATE RMSE (m)"]  # same name as in a run without a kidnap
     assert ate["passed"] is None and "kidnap" in ate["target"]

@@ -8,7 +8,7 @@ import gtsam
 import numpy as np
 import pytest
 
-from tagloc.geometry import SE3
+from tagloc.geometry import SE3, inverse_h, log_h
 from tagloc.mapping import CameraFrame, MappingError, Survey, build_tag_map
 from tagloc.mapping.calibration import (
     N_CALIBRATION,
@@ -23,9 +23,9 @@ from tagloc.mapping.calibration import (
 from tagloc.mapping.corner_graph import corner_jacobians, gross_outliers, linearize_corners
 from tagloc.mapping.graph import odometry_sigmas
 from tagloc.mapping.gtsam_bridge import cov_from_gtsam, cov_to_gtsam, from_pose3, to_pose3
-from tagloc.mapping.initialize import consensus_rotation, inverse_h
+from tagloc.mapping.initialize import consensus_rotation
 from tagloc.mapping.observations import collect_observations, interpolate_odometry
-from tagloc.mapping.odometry_factors import linearize_odometry, log_batch, odometry_residuals
+from tagloc.mapping.odometry_factors import linearize_odometry, odometry_residuals
 from tagloc.sim import ObservationConfig, World, load_default_world, simulate_drive
 from tagloc.sim.odometry import simulate_odometry
 from tagloc.sim.survey import odometry_noise_of, survey_from_drive
@@ -131,7 +131,7 @@ def test_calibration_derivative_matches_central_differences() -> None:
         plus = corrected_steps(step, calibration_from_vector(c + dc))
         minus = corrected_steps(step, calibration_from_vector(c - dc))
         Z_inv = inverse_h(Z)
-        numeric[..., i] = (log_batch(Z_inv @ plus) - log_batch(Z_inv @ minus)) / (2 * h)
+        numeric[..., i] = (log_h(Z_inv @ plus) - log_h(Z_inv @ minus)) / (2 * h)
     assert np.abs(corrected_step_jacobians(step, Z) - numeric).max() < 1e-8
 
 

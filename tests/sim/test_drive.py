@@ -93,7 +93,7 @@ def test_world_camera_becomes_a_camera_model_that_projects_like_opencv() -> None
             points_cam.reshape(-1, 1, 3),
             np.zeros(3),
             np.zeros(3),
-            camera.K(),
+            np.array([[600.0, 0, 640], [0, 610, 360], [0, 0, 1]]),
             np.array(distortion["coefficients"]),
         )
         np.testing.assert_allclose(model.project(points_cam), expected.reshape(-1, 2), atol=1e-8)

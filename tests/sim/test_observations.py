@@ -49,14 +49,14 @@ def clean(drive: Drive) -> list[ObservedFrame]:
 def test_true_corners_match_opencv_projection_of_the_true_pose(
     clean: list[ObservedFrame], world: World
 ) -> None:
-    camera = world.robot.camera
+    K = world.robot.camera.camera_model().K
     sightings = [s for f in clean for s in f.truth]
     assert len(sightings) > 100
     for s in sightings[::7]:
         T_cam_tag = s.T_cam_tag
         rvec = T_cam_tag.rotation.as_rotvec()
         expected, _ = cv2.projectPoints(
-            tag_object_points(s.size), rvec, np.asarray(T_cam_tag.translation), camera.K(), None
+            tag_object_points(s.size), rvec, np.asarray(T_cam_tag.translation), K, None
         )
         np.testing.assert_allclose(s.corners_px, expected.reshape(4, 2), atol=1e-6)
     for f in clean:

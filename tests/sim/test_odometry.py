@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -165,7 +164,7 @@ def test_turn_scale_error_applies_per_radian() -> None:
     # ... but not after the first one
     first = int(np.argmax(np.abs(truth[:, 2]) > math.pi - 1e-9))
     assert odom[first, 2] - truth[first, 2] == pytest.approx(0.1 * math.pi, rel=1e-6)
-    assert replace(params, yaw_scale_error=0.0) == DriftParameters()
+    assert params.model_copy(update={"yaw_scale_error": 0.0}) == DriftParameters()
 
 
 def test_legged_drifts_more_than_wheel(office_xy_yaw: FloatArray) -> None:

@@ -121,7 +121,7 @@ def test_every_tag_is_seen_from_the_route(world: World) -> None:
     T_cam_map = T_map_cam.inverse()
     cam_xy = T_map_cam.translation[:, :2]
     opaque = _segments(world.walls_in_map(), opaque_only=True)
-    K = cam.K()
+    K = cam.camera_model().K
     for tag in world.tags:
         T_map_tag = world.T_map_tag(tag)
         h = tag.size / 2

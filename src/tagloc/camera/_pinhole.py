@@ -16,8 +16,9 @@ from typing import Any, ClassVar, Self
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.camera import _fields
-from tagloc.camera.model import BoolArray, FloatArray, as_vectors
+from tagloc.camera.model import BoolArray, as_vectors
 from tagloc.errors import CameraModelError
 
 #: Largest image side, focal length and principal point offset (px), distortion coefficient:

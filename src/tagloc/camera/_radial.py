@@ -18,9 +18,9 @@ import math
 from typing import TypeAlias
 
 import numpy as np
-import numpy.typing as npt
 
-FloatArray: TypeAlias = npt.NDArray[np.float64]
+from tagloc._types import FloatArray
+
 Coeffs: TypeAlias = tuple[float, float, float, float]
 
 #: Relative step below which the Newton iteration has converged (a few ulp).

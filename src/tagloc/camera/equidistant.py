@@ -19,9 +19,9 @@ from typing import ClassVar
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.camera import _fields, _radial
 from tagloc.camera._pinhole import Distorted, _Pinhole
-from tagloc.camera.model import FloatArray
 
 #: Below this normalized radius ``theta_d / r`` and its derivative use their Taylor series
 #: (the closed forms are 0/0 at r = 0).

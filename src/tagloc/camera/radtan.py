@@ -17,9 +17,9 @@ from typing import ClassVar
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.camera import _fields, _radial
 from tagloc.camera._pinhole import Distorted, _Pinhole
-from tagloc.camera.model import FloatArray
 
 #: Largest accepted residual |d(x) - xd| of an undistorted point (normalized units; 1e-7 px at
 #: f = 1000 px). Newton reaches ~1e-16; a larger residual means no solution.

@@ -156,6 +156,7 @@ def run_demo(
     from tagloc.eval.drive_report import summarize_drive
     from tagloc.eval.plots import plot_world_and_paths
     from tagloc.fileutil import atomic_write_text, check_outputs
+    from tagloc.io import write_tum
     from tagloc.sim import load_default_world, load_world
     from tagloc.sim.scenarios import ScenarioSource, build_scenario, localize_scenario
 
@@ -194,7 +195,9 @@ def run_demo(
             )
     # 3. evaluation reports, the picture, the table
     run_true = _labelled(run_true, "the true tag map", "the true tag map (the world's tags, exact)")
-    summaries = {"true map": write_report(run_true, out / "localize_true_map")}
+    summaries = {
+        "true map": write_report(run_true, out / "localize_true_map", write_trajectory=write_tum)
+    }
     files += [out / "localize_true_map" / "report.html"]
     if run_built is not None:
         run_built = _labelled(
@@ -202,7 +205,9 @@ def run_demo(
             "the built tag map",
             f"the built tag map ({out / 'map' / 'tags.yaml'}, from the survey)",
         )
-        summaries["built map"] = write_report(run_built, out / "localize")
+        summaries["built map"] = write_report(
+            run_built, out / "localize", write_trajectory=write_tum
+        )
         files += [out / "localize" / "report.html"]
     main = run_built or run_true
     ate = summaries["built map" if run_built else "true map"].estimators["fused"].ate_rmse_m

@@ -2,8 +2,9 @@
 
 - ``tagloc eval run --scenario NAME --out DIR``: simulate and localize a scenario, then write
   the evaluation (``report.html``, ``summary.json``, TUM files) and print the checks.
-- ``tagloc eval files --truth truth.tum --est fused.tum [--est ...]``: ATE and RPE (via evo) of
-  TUM trajectories against a reference, e.g. the files ``tagloc localize`` wrote.
+- ``tagloc eval files --truth truth.tum --est fused.tum [--est ...]``: ATE and RPE (as
+  ``evo_ape`` / ``evo_rpe`` compute them) of TUM trajectories against a reference, e.g. the
+  files ``tagloc localize`` wrote.
 
 Sub-commands may also register themselves on :data:`eval_app` from their own modules.
 """
@@ -62,6 +63,7 @@ def eval_run(
     from tagloc.eval import EvalConfig, write_report
     from tagloc.eval.report import REPORT_FILES
     from tagloc.fileutil import check_outputs
+    from tagloc.io import write_tum
     from tagloc.sim.scenarios import run_scenario
 
     check_outputs({"--out": out}, directories={"--out": REPORT_FILES})
@@ -71,7 +73,7 @@ def eval_run(
         rotation_tol_deg=rotation_deg,
     )
     run = run_scenario(scenario, seed=seed, duration_s=duration, lidar=lidar)
-    summary = write_report(run, out, config=config)
+    summary = write_report(run, out, write_trajectory=write_tum, config=config)
     print_summary(summary)
     typer.echo(f"wrote report.html, summary.json and TUM files to {out}")
     if strict and not summary.passed:
@@ -123,8 +125,11 @@ def eval_files(
         float, typer.Option(help="Stamp association tolerance, s.", callback=in_range(ge=0))
     ] = 0.01,
     align: Annotated[bool, typer.Option("--align", help="SE(3)-align first (evo -a).")] = False,
+    correct_scale: Annotated[
+        bool, typer.Option("--correct-scale", help="With --align, also fit a scale (evo -as).")
+    ] = False,
 ) -> None:
-    """ATE and RPE (evo) of TUM trajectories against a reference TUM trajectory."""
+    """ATE and RPE of TUM trajectories against a reference TUM trajectory."""
     from rich.console import Console
     from rich.table import Table
 
@@ -132,7 +137,8 @@ def eval_files(
     from tagloc.io import read_tum
 
     stamps_ref_ns, T_map_base_ref = read_tum(truth)
-    table = Table(title=f"against {truth}" + (" (aligned)" if align else ""))
+    aligned = (" (Sim(3)-aligned)" if correct_scale else " (aligned)") if align else ""
+    table = Table(title=f"against {truth}{aligned}")
     for column in ("estimate", "matched", "ATE RMSE (m)", "ATE max (m)",
                    f"RPE/{delta_m:g} m (m)", "RPE rot (deg)"):  # fmt: skip
         table.add_column(column, justify="right")
@@ -140,7 +146,7 @@ def eval_files(
         stamps_est_ns, T_map_base_est = read_tum(path)
         result = compare_trajectories(
             stamps_ref_ns, T_map_base_ref, stamps_est_ns, T_map_base_est,
-            max_diff_s=max_diff_s, delta_m=delta_m, align=align,
+            max_diff_s=max_diff_s, delta_m=delta_m, align=align, correct_scale=correct_scale,
         )  # fmt: skip
         rpe = result.rpe
         table.add_row(

@@ -1,26 +1,35 @@
-"""Evaluation: trajectory error metrics (ATE, RPE via evo), the reliability protocol, the naive
+"""Evaluation: trajectory error metrics (ATE with Umeyama alignment, RPE by distance and time;
+equal to evo's on the same trajectories), the reliability protocol, the naive
 baseline beside the filter, drift summaries, plots and the HTML / ``summary.json`` report."""
 
+from tagloc.eval.alignment import Alignment, umeyama_alignment
+from tagloc.eval.association import associate_stamps
+from tagloc.eval.errors import EvaluationError
 from tagloc.eval.metrics import TrajectoryError, absolute_trajectory_error, endpoint_drift
 from tagloc.eval.protocol import EvalConfig, KidnapRecovery, Reliability
 from tagloc.eval.report import export_tum, write_report
+from tagloc.eval.rpe import RelativeError, relative_pose_error, relative_pose_error_per_time
 from tagloc.eval.summary import EstimatorScore, EvalSummary, Evaluation, evaluate, summary_to_dict
-from tagloc.eval.trajectories import RelativeError, relative_pose_error
 
 __all__ = [
+    "Alignment",
     "EstimatorScore",
     "EvalConfig",
     "EvalSummary",
     "Evaluation",
+    "EvaluationError",
     "KidnapRecovery",
     "RelativeError",
     "Reliability",
     "TrajectoryError",
     "absolute_trajectory_error",
+    "associate_stamps",
     "endpoint_drift",
     "evaluate",
     "export_tum",
     "relative_pose_error",
+    "relative_pose_error_per_time",
     "summary_to_dict",
+    "umeyama_alignment",
     "write_report",
 ]

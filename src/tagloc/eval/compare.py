@@ -1,8 +1,10 @@
-"""Compare trajectories given as stamped poses (e.g. read from TUM files): ATE and RPE via evo.
+"""Compare trajectories given as stamped poses (e.g. read from TUM files): ATE and RPE.
 
-Stamps are associated as ``evo_ape`` does (``evo.core.sync.associate_trajectories``, nearest
-stamp within ``max_diff_s``), so the ATE equals ``evo_ape tum truth.tum est.tum`` on the same
-files; with identical stamps (tagloc's own exports) every pose is matched.
+Stamps are associated as ``evo_ape`` does (:mod:`tagloc.eval.association`: nearest stamp within
+``max_diff_s``), then the ATE (:mod:`tagloc.eval.metrics`) and the RPE per metre of reference
+path (:mod:`tagloc.eval.rpe`) are computed on the pairs, so the ATE equals
+``evo_ape tum truth.tum est.tum`` on the same files; with identical stamps (tagloc's own exports)
+every pose is matched.
 """
 
 from __future__ import annotations
@@ -12,8 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from tagloc.eval.metrics import EvaluationError, TrajectoryError, _to_evo, absolute_trajectory_error
-from tagloc.eval.trajectories import RelativeError, relative_pose_error
+from tagloc.eval.association import associate_stamps
+from tagloc.eval.errors import EvaluationError
+from tagloc.eval.metrics import TrajectoryError, paired_ate
+from tagloc.eval.rpe import RelativeError, relative_pose_error
 from tagloc.geometry import SE3
 
 
@@ -36,6 +40,13 @@ class TrajectoryComparison:
     rpe: RelativeError | None
 
 
+def _batch(stamps_ns: npt.ArrayLike, T_map_base: SE3, name: str) -> npt.NDArray[np.int64]:
+    stamps = np.asarray(stamps_ns, dtype=np.int64)
+    if len(T_map_base.batch_shape) != 1 or len(T_map_base) != len(stamps):
+        raise EvaluationError(f"{name}: expected a batch of {len(stamps)} poses, one per stamp")
+    return stamps
+
+
 def compare_trajectories(
     stamps_ref_ns: npt.NDArray[np.int64],
     T_map_base_ref: SE3,
@@ -45,8 +56,9 @@ def compare_trajectories(
     max_diff_s: float = 0.01,
     delta_m: float = 1.0,
     align: bool = False,
+    correct_scale: bool = False,
 ) -> TrajectoryComparison:
-    """Associate by stamp, then ATE (evo APE) and RPE (evo RPE) of the estimate.
+    """Associate by stamp, then ATE and RPE (per ``delta_m`` of reference path) of the estimate.
 
     Parameters
     ----------
@@ -58,28 +70,23 @@ def compare_trajectories(
     delta_m : float
         RPE pair spacing along the reference path, metres.
     align : bool
-        Rigidly align the estimate onto the reference first (``evo_ape -a``).
+        Align the estimate onto the reference first (``evo_ape -a``).
+    correct_scale : bool
+        With ``align``, also solve for a scale (``evo_ape -as``).
 
     Raises
     ------
     EvaluationError
         If fewer than 2 poses can be associated.
     """
-    from evo.core import sync
-
-    traj_ref = _to_evo(stamps_ref_ns, T_map_base_ref, "reference")
-    traj_est = _to_evo(stamps_est_ns, T_map_base_est, "estimate")
-    try:
-        ref, est = sync.associate_trajectories(traj_ref, traj_est, max_diff=max_diff_s)
-    except sync.SyncException as exc:
-        raise EvaluationError(f"cannot associate the trajectories by stamp: {exc}") from None
-    if ref.num_poses < 2:
-        raise EvaluationError(f"only {ref.num_poses} poses associated within {max_diff_s} s")
-    stamps_ns = np.round(np.asarray(ref.timestamps) * 1e9).astype(np.int64)
-    T_ref = SE3.from_matrix(np.asarray(ref.poses_se3), normalize=True)
-    T_est = SE3.from_matrix(np.asarray(est.poses_se3), normalize=True)
+    stamps_ref = _batch(stamps_ref_ns, T_map_base_ref, "reference")
+    stamps_est = _batch(stamps_est_ns, T_map_base_est, "estimate")
+    i_ref, i_est = associate_stamps(stamps_ref, stamps_est, round(max_diff_s * 1e9))
+    if len(i_ref) < 2:
+        raise EvaluationError(f"only {len(i_ref)} poses associated within {max_diff_s} s")
+    T_ref, T_est = T_map_base_ref[i_ref], T_map_base_est[i_est]
     return TrajectoryComparison(
-        n_matched=int(ref.num_poses),
-        ate=absolute_trajectory_error(stamps_ns, T_ref, T_est, align=align),
-        rpe=relative_pose_error(stamps_ns, T_ref, T_est, delta_m=delta_m),
+        n_matched=len(i_ref),
+        ate=paired_ate(T_ref, T_est, align=align, correct_scale=correct_scale),
+        rpe=relative_pose_error(stamps_ref[i_ref], T_ref, T_est, delta_m=delta_m),
     )

@@ -38,7 +38,7 @@ class DriveSummary:
 
 
 def summarize_drive(drive: Drive) -> DriveSummary:
-    """Compare the drive's odometry with its ground truth (evo computes the ATE)."""
+    """Compare the drive's odometry with its ground truth (ATE unaligned and aligned)."""
     length_m = float(drive.distance_m[-1])
     drift_m, drift_yaw = endpoint_drift(drive.T_map_base, drive.T_odom_base)
     odom_ate = absolute_trajectory_error(drive.stamps_ns, drive.T_map_base, drive.T_odom_base)

@@ -1,26 +1,37 @@
-"""Trajectory error metrics computed with evo (Grupp, 2017), the field's reference implementation.
+"""Absolute trajectory error (ATE): the translation part of ``evo_ape``, computed here.
 
-Conventions: both trajectories are batched :class:`~tagloc.geometry.SE3` poses of ``base`` in a
-common fixed frame (``T_map_base`` ground truth vs an estimate), sampled at the same
-integer-nanosecond stamps. ATE is the RMSE of the translation error (metres), optionally after a
-rigid (SE(3), Umeyama 1991) alignment of the estimate onto the reference; without alignment it
-measures the error a user of the estimate actually sees when the frames coincide at the start (as
-``odom`` and ``map`` do in the simulator).
+Both trajectories are batched :class:`~tagloc.geometry.SE3` poses of ``base`` in a common fixed
+frame (``T_map_base`` ground truth ``Q_i`` vs an estimate ``P_i``) at the same integer-nanosecond
+stamps. The per-pose error is
+
+``e_i = |t(P_i) - t(Q_i)|``   (metres; ``evo_ape`` ``--pose_relation trans_part``)
+
+optionally after aligning the estimate onto the reference (:mod:`tagloc.eval.alignment`:
+SE(3) Umeyama as ``evo_ape -a``, Sim(3) as ``-as``). The summary is
+``rmse = sqrt(1/n sum e_i^2)``, the mean, the median and the max. Without alignment the ATE is the
+error a user of the estimate actually sees when the frames coincide at the start (as ``odom`` and
+``map`` do in the simulator).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from tagloc.errors import TaglocError
+from tagloc.eval.alignment import umeyama_alignment
+from tagloc.eval.errors import EvaluationError
 from tagloc.geometry import SE3
 
-
-class EvaluationError(TaglocError, ValueError):
-    """Trajectories that cannot be compared (different lengths, stamps, NaN)."""
+__all__ = [
+    "EvaluationError",
+    "TrajectoryError",
+    "absolute_trajectory_error",
+    "endpoint_drift",
+    "paired_ate",
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -34,7 +45,9 @@ class TrajectoryError:
     errors_m : (N,) float
         The per-pose translation error, metres.
     aligned : bool
-        Whether the estimate was rigidly aligned to the reference first.
+        Whether the estimate was aligned to the reference first.
+    scale : float
+        The scale of the alignment (1.0 unless ``correct_scale``).
     """
 
     rmse: float
@@ -43,25 +56,27 @@ class TrajectoryError:
     max: float
     errors_m: NDArray[np.float64]
     aligned: bool
+    scale: float = 1.0
 
 
-def _to_evo(stamps_ns: NDArray[np.int64], T_ref_base: SE3, name: str) -> object:
-    from evo.core.trajectory import PoseTrajectory3D
-
-    matrices = np.asarray(T_ref_base.as_matrix(), dtype=np.float64)
-    if matrices.ndim != 3:
+def _positions(T_ref_base: SE3, name: str) -> NDArray[np.float64]:
+    xyz = np.asarray(T_ref_base.translation, dtype=np.float64)
+    if xyz.ndim != 2:
         raise EvaluationError(f"{name}: expected a batch of poses, got a single pose")
-    if not np.all(np.isfinite(matrices)):
+    if not np.all(np.isfinite(xyz)):
         raise EvaluationError(f"{name}: trajectory contains NaN or inf")
-    return PoseTrajectory3D(
-        poses_se3=list(matrices), timestamps=np.asarray(stamps_ns, dtype=np.float64) * 1e-9
-    )
+    return xyz
 
 
 def absolute_trajectory_error(
-    stamps_ns: NDArray[np.int64], T_map_base_ref: SE3, T_map_base_est: SE3, *, align: bool = False
+    stamps_ns: NDArray[np.int64],
+    T_map_base_ref: SE3,
+    T_map_base_est: SE3,
+    *,
+    align: bool = False,
+    correct_scale: bool = False,
 ) -> TrajectoryError:
-    """ATE (translation part) of an estimate against a reference, via ``evo.core.metrics.APE``.
+    """ATE (translation part) of an estimate against a reference (module docstring).
 
     Parameters
     ----------
@@ -70,7 +85,9 @@ def absolute_trajectory_error(
     T_map_base_ref, T_map_base_est : SE3 batches of N poses
         Reference (ground truth) and estimate, both ``base`` in the same fixed frame.
     align : bool
-        Rigidly align (SE(3) Umeyama, no scale) the estimate onto the reference first.
+        Align the estimate onto the reference first (Umeyama; ``evo_ape -a``).
+    correct_scale : bool
+        With ``align``, also solve for a scale (``evo_ape -as``).
 
     Raises
     ------
@@ -78,9 +95,6 @@ def absolute_trajectory_error(
         Lengths differ, stamps are not strictly increasing, poses are not finite, or the
         alignment is degenerate (a static or straight track).
     """
-    from evo.core import metrics
-    from evo.core.geometry import GeometryException
-
     stamps = np.asarray(stamps_ns)
     if len(T_map_base_ref) != len(stamps) or len(T_map_base_est) != len(stamps):
         raise EvaluationError(
@@ -89,29 +103,39 @@ def absolute_trajectory_error(
         )
     if len(stamps) < 2 or np.any(np.diff(stamps) <= 0):
         raise EvaluationError("stamps_ns must hold at least 2 strictly increasing stamps")
-    traj_ref = _to_evo(stamps, T_map_base_ref, "reference")
-    traj_est = _to_evo(stamps, T_map_base_est, "estimate")
+    return paired_ate(T_map_base_ref, T_map_base_est, align=align, correct_scale=correct_scale)
+
+
+def paired_ate(
+    T_map_base_ref: SE3, T_map_base_est: SE3, *, align: bool = False, correct_scale: bool = False
+) -> TrajectoryError:
+    """ATE of poses paired row by row (already associated: no stamps checked).
+
+    Raises
+    ------
+    EvaluationError
+        Lengths differ, poses are not finite, or the alignment is degenerate.
+    """
+    if len(T_map_base_ref) != len(T_map_base_est):
+        raise EvaluationError(
+            f"{len(T_map_base_ref)} reference vs {len(T_map_base_est)} estimated poses"
+        )
+    xyz_ref = _positions(T_map_base_ref, "reference")
+    xyz_est = _positions(T_map_base_est, "estimate")
+    scale = 1.0
     if align:
-        try:
-            traj_est.align(traj_ref)  # type: ignore[attr-defined]
-        except GeometryException as exc:
-            raise EvaluationError(
-                f"cannot align the estimate onto the reference ({exc}): the positions do not "
-                "span enough space (a static or straight track); evaluate it without alignment"
-            ) from None
-    ape = metrics.APE(metrics.PoseRelation.translation_part)
-    try:
-        ape.process_data((traj_ref, traj_est))
-    except metrics.MetricsException as exc:
-        raise EvaluationError(f"cannot compute the ATE: {exc}") from None
-    errors = np.asarray(ape.error, dtype=np.float64)
+        alignment = umeyama_alignment(xyz_est, xyz_ref, with_scale=correct_scale)
+        xyz_est = alignment.apply_to_positions(xyz_est)
+        scale = alignment.scale
+    errors = np.linalg.norm(xyz_est - xyz_ref, axis=1)
     return TrajectoryError(
-        rmse=float(np.sqrt(np.mean(errors**2))),
+        rmse=math.sqrt(float(np.mean(errors**2))),
         mean=float(np.mean(errors)),
         median=float(np.median(errors)),
         max=float(np.max(errors)),
         errors_m=errors,
         aligned=align,
+        scale=scale,
     )
 
 

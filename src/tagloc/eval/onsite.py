@@ -23,8 +23,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.camera import CameraModel
 from tagloc.eval.onsite_stats import ErrorStats, error_stats, fused_pose_at, truth_pose_at
 from tagloc.geometry import SE3
@@ -47,7 +47,6 @@ __all__ = [
     "observations_of_tag",
 ]
 
-FloatArray = npt.NDArray[np.float64]
 #: A stream that can be iterated more than once (a bag source, a scenario source, a list).
 StreamFactory = Callable[[], Iterable[tuple[str, Message]]]
 

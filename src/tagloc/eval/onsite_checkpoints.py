@@ -25,6 +25,7 @@ from pydantic import Field
 
 from tagloc.config import StrictModel, parse_yaml_mapping, validate
 from tagloc.localize.run import LocalizationRun
+from tagloc.units import S_NS
 
 __all__ = [
     "CheckpointSpec",
@@ -36,7 +37,6 @@ __all__ = [
     "parse_checkpoints",
 ]
 
-S_NS = 1_000_000_000
 
 
 class CheckpointSpec(StrictModel):

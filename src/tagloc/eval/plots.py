@@ -5,14 +5,12 @@ from __future__ import annotations
 import os
 
 import numpy as np
-import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.fileutil import atomic_path
 from tagloc.geometry import SE3
 from tagloc.sim import World
 from tagloc.tags.tagmap import TagMap
-
-FloatArray = npt.NDArray[np.float64]
 
 _MATERIAL_STYLE = {
     "wall": {"color": "0.15", "linewidth": 2.0, "linestyle": "-"},

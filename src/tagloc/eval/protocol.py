@@ -19,16 +19,15 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
+from tagloc.config import StrictModel
 from tagloc.eval.trajectories import PoseErrors
 from tagloc.localize.run import CameraFrameRecord, FixAttempt
 
 
-class EvalConfig(BaseModel):
+class EvalConfig(StrictModel):
     """Thresholds of the evaluation (units in the names) and the pass/fail targets."""
-
-    model_config = ConfigDict(frozen=True, extra="forbid")
 
     opportunity_range_m: float = Field(3.0, gt=0, description="Z: tag in view within this range")
     position_tol_m: float = Field(0.05, gt=0, description="X: position error of a success")

@@ -8,8 +8,9 @@ each written atomically (temporary file beside it, then rename):
   range and angle, suspect sources, kidnaps) and the figures of :mod:`tagloc.eval.report_plots`
   embedded as base64 PNGs (no external files);
 - ``truth.tum`` (when known), ``odometry.tum``, ``fused.tum``, ``baseline.tum``: ``T_map_base`` of
-  each estimate at every odometry stamp, so ``evo_ape tum truth.tum fused.tum`` reproduces the
-  report's ATE (the TUM writer is exact to the nanosecond and to float repr).
+  each estimate at every odometry stamp, written by the :class:`TrajectoryWriter` the caller
+  passes (the CLI passes :func:`tagloc.io.write_tum`, exact to the nanosecond and to float
+  repr), so ``evo_ape tum truth.tum fused.tum`` reproduces the report's ATE.
 """
 
 from __future__ import annotations
@@ -21,11 +22,16 @@ import logging
 import math
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+import numpy.typing as npt
 
 from tagloc.eval.fixstats import AcceptanceBin
 from tagloc.eval.protocol import EvalConfig
 from tagloc.eval.summary import EvalSummary, Evaluation, evaluate, summary_to_dict
 from tagloc.fileutil import atomic_write_text
+from tagloc.geometry import SE3
 from tagloc.localize.run import LocalizationRun
 
 logger = logging.getLogger(__name__)
@@ -36,8 +42,20 @@ TUM_FILES = {"truth": "truth.tum", "odometry": "odometry.tum", "fused": "fused.t
 REPORT_FILES = (*TUM_FILES.values(), "summary.json", "report.html")
 
 
+class TrajectoryWriter(Protocol):
+    """Writes one trajectory file atomically (:func:`tagloc.io.write_tum` is one)."""
+
+    def __call__(
+        self, path: Path, stamps_ns: npt.NDArray[np.int64], T_map_base: SE3, /
+    ) -> None: ...
+
+
 def write_report(
-    run: LocalizationRun, out_dir: Path, *, config: EvalConfig | None = None
+    run: LocalizationRun,
+    out_dir: Path,
+    *,
+    write_trajectory: TrajectoryWriter,
+    config: EvalConfig | None = None,
 ) -> EvalSummary:
     """Evaluate ``run`` and write ``summary.json``, ``report.html`` and the TUM files.
 
@@ -46,6 +64,8 @@ def write_report(
     run : LocalizationRun
     out_dir : Path
         Created if missing; existing files of the same names are replaced.
+    write_trajectory : TrajectoryWriter
+        Writes each trajectory file (``tagloc.io.write_tum``).
     config : EvalConfig, optional
         Protocol thresholds and targets (defaults: Z = 3 m, X = 5 cm, Y = 2 deg).
 
@@ -61,7 +81,7 @@ def write_report(
     ev = evaluate(run, config)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    export_tum(ev, out_dir)
+    export_tum(ev, out_dir, write_trajectory)
     atomic_write_text(
         out_dir / "summary.json", json.dumps(summary_to_dict(ev.summary), indent=2) + "\n"
     )
@@ -70,17 +90,17 @@ def write_report(
     return ev.summary
 
 
-def export_tum(ev: Evaluation, out_dir: Path) -> list[Path]:
-    """Write each compared trajectory as TUM (see the module docstring); return the paths."""
-    from tagloc.io import write_tum  # I/O lives in tagloc.io
-
+def export_tum(
+    ev: Evaluation, out_dir: Path, write_trajectory: TrajectoryWriter
+) -> list[Path]:
+    """Write each compared trajectory with ``write_trajectory`` (module docstring); the paths."""
     traj = ev.trajectories
     series = {"truth": traj.T_map_base_truth, **traj.estimates()}
     written = []
     for name, T_map_base in series.items():
         if T_map_base is not None:
             written.append(out_dir / TUM_FILES[name])
-            write_tum(written[-1], traj.stamps_ns, T_map_base)
+            write_trajectory(written[-1], traj.stamps_ns, T_map_base)
     return written
 
 
@@ -205,7 +225,7 @@ def _estimators_table(s: EvalSummary) -> str:
             r.fraction if r else None, f"{r.n_success} / {r.n_opportunities}" if r else None,
         ])  # fmt: skip
     note = (
-        "<p>ATE: evo APE, translation part, unaligned (odom = map at the start). Reliability: "
+        "<p>ATE: APE, translation part, unaligned (odom = map at the start). Reliability: "
         f"camera frames with a tag truly in view within {s.config.opportunity_range_m:g} m "
         "where a fix was accepted and the published pose right after is within "
         f"{s.config.position_tol_m * 100:g} cm / {s.config.rotation_tol_deg:g} deg of truth. "

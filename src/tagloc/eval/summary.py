@@ -1,7 +1,7 @@
 """Score a :class:`~tagloc.localize.run.LocalizationRun`: the numbers of the report.
 
 :func:`evaluate` reads as the list of what is measured: the compared trajectories (truth,
-odometry only, fused, naive baseline), ATE (``evo`` APE, translation, unaligned: ``odom`` and
+odometry only, fused, naive baseline), ATE (translation, unaligned, as ``evo_ape``: ``odom`` and
 ``map`` coincide at the start) and RPE per metre for each, the reliability protocol, acceptance
 against range and angle, false fixes, suspect sources, kidnap recovery, the largest correction
 jump, what the degradation ladder and the correction's bounds did, and the pass/fail checks.
@@ -67,7 +67,7 @@ class EstimatorScore:
     Attributes
     ----------
     ate_rmse_m, ate_mean_m, ate_median_m, ate_max_m : float
-        Translation APE statistics (evo, unaligned), metres.
+        Translation APE statistics (unaligned), metres.
     rotation_rmse_deg : float
         RMSE of the rotation-angle error, degrees.
     rpe : RelativeError or None

@@ -17,10 +17,10 @@ import os
 from typing import Any, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator
+from pydantic import Field, ValidationInfo, field_validator
 
 from tagloc.camera import PinholeRadtan
-from tagloc.config import parse_yaml_mapping, read_text_file, validate
+from tagloc.config import StrictModel, parse_yaml_mapping, read_text_file, validate
 from tagloc.fileutil import atomic_write_text
 from tagloc.sim.render_config import RenderConfig
 from tagloc.tags.covariance import NoiseModel
@@ -45,13 +45,11 @@ QUICK_GRID: dict[str, Any] = {
 }
 
 
-class TagSweepTargets(BaseModel):
+class TagSweepTargets(StrictModel):
     """The targets, checked on a sweep result (:func:`tagloc.eval.tag_sweep.run_tag_sweep`).
 
     Accuracy targets apply to the reference condition; flips and NEES to the whole sweep.
     """
-
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
     position_median_2m_m: float = Field(0.01, gt=0, description="median at 2 m, every angle")
     position_median_4m_m: float = Field(0.03, gt=0, description="median at 4 m, every angle")
@@ -66,7 +64,7 @@ class TagSweepTargets(BaseModel):
     joint_rotation_distance_m: float = Field(2.0, gt=0, description="... at this distance")
 
 
-class TagSweepConfig(BaseModel):
+class TagSweepConfig(StrictModel):
     """What a tag-sensor sweep renders, detects and scores.
 
     Grid
@@ -98,8 +96,6 @@ class TagSweepConfig(BaseModel):
         ``render`` is the renderer's config; ``defocus_sigma_px`` and ``read_noise_dn`` are set
         per cell. ``background_albedo`` is the flat backdrop.
     """
-
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
     distances_m: tuple[float, ...] = (0.5, 1.0, 2.0, 3.0, 4.0, 6.0)
     angles_deg: tuple[float, ...] = (0.0, 15.0, 30.0, 45.0, 60.0, 75.0)

@@ -8,25 +8,37 @@ Four estimates of ``T_map_base`` share the run's odometry stamps:
 - ``fused``: the filter's published correction, ``T_map_odom @ T_odom_base``;
 - ``baseline``: the naive snap-to-every-fix baseline (:mod:`tagloc.localize.baseline`).
 
-RPE follows Sturm et al. (2012, TUM RGB-D benchmark, eq. 3), computed by ``evo.core.metrics.RPE``
-over pairs of stamps whose ground-truth path length differs by ``delta_m``.
+Their RPE is :mod:`tagloc.eval.rpe` (re-exported here).
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
-from tagloc.eval.metrics import EvaluationError, _to_evo
+from tagloc._types import FloatArray
+from tagloc.eval.errors import EvaluationError
+from tagloc.eval.rpe import RelativeError, relative_pose_error
 from tagloc.geometry import SE3
 from tagloc.localize.baseline import BaselineRun, naive_snap_baseline
 from tagloc.localize.run import LocalizationRun
 
-FloatArray = npt.NDArray[np.float64]
+__all__ = [
+    "SNAP_EVENT_KINDS",
+    "CorrectionJumps",
+    "PoseErrors",
+    "RelativeError",
+    "RunTrajectories",
+    "baseline_jumps",
+    "correction_jumps",
+    "fused_jumps",
+    "pose_errors",
+    "relative_pose_error",
+    "run_trajectories",
+]
 
 #: Event kinds at which a correction snaps by design (excluded from the largest jump).
 SNAP_EVENT_KINDS = ("initialized", "reinitialized_kidnap")
@@ -103,82 +115,6 @@ def _rotation_angle_deg(R_map_ref: FloatArray, R_map_est: FloatArray) -> FloatAr
     trace = np.einsum("...ij,...ij->...", R_map_ref, R_map_est)  # trace(R_ref^T R_est)
     angle_deg: FloatArray = np.degrees(np.arccos(np.clip((trace - 1.0) / 2.0, -1.0, 1.0)))
     return angle_deg
-
-
-@dataclass(frozen=True, slots=True)
-class RelativeError:
-    """RPE over pairs ``delta_m`` of ground-truth path apart (consecutive pairs).
-
-    Attributes
-    ----------
-    delta_m : float
-        Path length between the two poses of a pair, metres (evo ``Unit.meters``).
-    n_pairs : int
-    translation_rmse_m, translation_max_m : float
-        Of the relative translation error per pair, metres (per ``delta_m`` travelled).
-    rotation_rmse_deg, rotation_max_deg : float
-        Of the relative rotation angle error per pair, degrees.
-    """
-
-    delta_m: float
-    n_pairs: int
-    translation_rmse_m: float
-    translation_max_m: float
-    rotation_rmse_deg: float
-    rotation_max_deg: float
-
-
-def relative_pose_error(
-    stamps_ns: npt.NDArray[np.int64],
-    T_map_base_ref: SE3,
-    T_map_base_est: SE3,
-    *,
-    delta_m: float = 1.0,
-) -> RelativeError | None:
-    """RPE of an estimate per ``delta_m`` metres of reference path, via ``evo.core.metrics.RPE``.
-
-    Pairs are chosen on the reference path (``pairs_from_reference=True``), so every estimate of
-    the same run is scored on the same pairs. Returns None when the path is too short for a pair.
-
-    Raises
-    ------
-    EvaluationError
-        Lengths differ, poses are not finite, or ``delta_m`` is not a finite positive number.
-    """
-    from evo.core import filters, metrics
-    from evo.core.units import Unit
-
-    if not (math.isfinite(delta_m) and delta_m > 0):
-        raise EvaluationError(f"RPE pair spacing {delta_m!r} m: expected a finite number > 0")
-    if len(T_map_base_ref) != len(stamps_ns) or len(T_map_base_est) != len(stamps_ns):
-        raise EvaluationError("relative_pose_error: trajectory lengths differ from the stamps")
-    traj_ref = _to_evo(stamps_ns, T_map_base_ref, "reference")
-    traj_est = _to_evo(stamps_ns, T_map_base_est, "estimate")
-    values: dict[metrics.PoseRelation, FloatArray] = {}
-    for relation in (
-        metrics.PoseRelation.translation_part,
-        metrics.PoseRelation.rotation_angle_deg,
-    ):
-        rpe = metrics.RPE(relation, delta_m, Unit.meters, pairs_from_reference=True)
-        try:
-            rpe.process_data((traj_ref, traj_est))
-        except filters.FilterException:  # no pair delta_m apart: the path is too short
-            return None
-        except metrics.MetricsException as exc:
-            raise EvaluationError(f"cannot compute the RPE per {delta_m:g} m: {exc}") from None
-        values[relation] = np.asarray(rpe.error, dtype=np.float64)
-    translation = values[metrics.PoseRelation.translation_part]
-    rotation = values[metrics.PoseRelation.rotation_angle_deg]
-    if translation.size == 0:
-        return None
-    return RelativeError(
-        delta_m=float(delta_m),
-        n_pairs=int(translation.size),
-        translation_rmse_m=float(np.sqrt(np.mean(translation**2))),
-        translation_max_m=float(translation.max()),
-        rotation_rmse_deg=float(np.sqrt(np.mean(rotation**2))),
-        rotation_max_deg=float(rotation.max()),
-    )
 
 
 @dataclass(frozen=True, slots=True)

@@ -19,9 +19,9 @@ import math
 from typing import TypeAlias
 
 import numpy as np
-import numpy.typing as npt
 
-FloatArray: TypeAlias = npt.NDArray[np.float64]
+from tagloc._types import FloatArray
+
 #: 12 floats: row-major rotation matrix, then translation.
 Rt: TypeAlias = tuple[
     float, float, float, float, float, float, float, float, float, float, float, float

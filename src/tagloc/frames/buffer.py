@@ -9,9 +9,10 @@ from typing import Any, TypeAlias
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.errors import FrameTreeError, TransformLookupError
 from tagloc.frames import _kernels, _validate
-from tagloc.frames._edge import DynamicEdge, FloatArray
+from tagloc.frames._edge import DynamicEdge
 from tagloc.frames._tree import (
     Edge,
     Plan,

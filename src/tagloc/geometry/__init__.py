@@ -36,7 +36,8 @@ Immutability
 The formulas follow J. Sola, J. Deray, D. Atchuthan, "A micro Lie theory for state estimation in
 robotics" (2018, arXiv:1812.01537), and T. Barfoot, "State Estimation for Robotics" (2017),
 Ch. 7. Covariance transport is in :mod:`tagloc.geometry.covariance`, the right Jacobians of
-``Exp`` in :mod:`tagloc.geometry.jacobians`.
+``Exp`` in :mod:`tagloc.geometry.jacobians`, the helpers on raw ``(N, 4, 4)`` stacks (``hat``,
+``inverse_h``, ``adjoint_h``, ``log_h``) in :mod:`tagloc.geometry.matrices`.
 """
 
 from tagloc.geometry.covariance import (
@@ -54,6 +55,7 @@ from tagloc.geometry.jacobians import (
     so3_right_jacobian,
     so3_right_jacobian_inv,
 )
+from tagloc.geometry.matrices import adjoint_h, hat, inverse_h, log_h, vee
 from tagloc.geometry.se2 import SE2
 from tagloc.geometry.se3 import SE3
 from tagloc.geometry.so3 import SO3
@@ -62,15 +64,20 @@ __all__ = [
     "SE2",
     "SE3",
     "SO3",
+    "adjoint_h",
     "cov_between",
     "cov_compose",
     "cov_inverse",
     "cov_left_to_right",
     "cov_right_to_left",
+    "hat",
+    "inverse_h",
+    "log_h",
     "se2_right_jacobian",
     "se2_right_jacobian_inv",
     "se3_right_jacobian",
     "se3_right_jacobian_inv",
     "so3_right_jacobian",
     "so3_right_jacobian_inv",
+    "vee",
 ]

@@ -7,14 +7,12 @@ data that enters from outside (user arrays, files, messages) is checked, once.
 from __future__ import annotations
 
 import math
-from typing import TypeAlias
 
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.errors import GeometryError
-
-FloatArray: TypeAlias = npt.NDArray[np.float64]
 
 #: Largest accepted ``max |R^T R - I|`` for a rotation matrix handed in from outside.
 ORTHONORMAL_TOL = 1e-6

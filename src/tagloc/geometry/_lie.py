@@ -23,8 +23,9 @@ from typing import ClassVar, Literal, Self, overload
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.errors import GeometryError
-from tagloc.geometry._checks import FloatArray, broadcast_jacobian, check_finite, to_float_array
+from tagloc.geometry._checks import broadcast_jacobian, check_finite, to_float_array
 
 Index = int | slice | Sequence[int] | npt.NDArray[np.integer] | npt.NDArray[np.bool_]
 

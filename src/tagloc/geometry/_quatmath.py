@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tagloc.geometry._checks import FloatArray
+from tagloc._types import FloatArray
 
 
 def _quat_rows(matrix: FloatArray) -> FloatArray:

@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from tagloc.geometry._checks import FloatArray
+from tagloc._types import FloatArray
 from tagloc.geometry._so3math import COT_SERIES, SERIES_ANGLE, SIN3_SERIES
 
 Vec3 = tuple[float, float, float]

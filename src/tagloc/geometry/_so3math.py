@@ -15,8 +15,8 @@ import math
 
 import numpy as np
 
+from tagloc._types import FloatArray
 from tagloc.errors import GeometryError
-from tagloc.geometry._checks import FloatArray
 
 EYE3 = np.eye(3)
 EYE3.flags.writeable = False

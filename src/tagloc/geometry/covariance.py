@@ -22,8 +22,9 @@ from typing import TypeVar
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.errors import GeometryError
-from tagloc.geometry._checks import FloatArray, check_finite, to_float_array
+from tagloc.geometry._checks import check_finite, to_float_array
 from tagloc.geometry._lie import LieGroup
 
 G = TypeVar("G", bound=LieGroup)

@@ -20,8 +20,9 @@ import math
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.geometry import _so3math as so3m
-from tagloc.geometry._checks import FloatArray, to_float_array
+from tagloc.geometry._checks import to_float_array
 
 #: ``(t^2 + 2 cos t - 2) / (2 t^4) = sum_k (-1)^k t^(2k) / (2k + 4)!``
 A2_SERIES = tuple((-1) ** k / math.factorial(2 * k + 4) for k in range(9))

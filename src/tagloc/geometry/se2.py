@@ -15,11 +15,11 @@ from typing import ClassVar, Literal, overload
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.errors import GeometryError
 from tagloc.geometry import _checks, _scalar
 from tagloc.geometry import _so3math as so3m
 from tagloc.geometry import jacobians as jac
-from tagloc.geometry._checks import FloatArray
 from tagloc.geometry._lie import Index, LieGroup
 from tagloc.geometry.se3 import SE3
 
@@ -89,6 +89,17 @@ class SE2(LieGroup):
         """The identity, or a batch of ``n`` identities."""
         shape: tuple[int, ...] = () if n is None else (n,)
         return cls._make(np.zeros((*shape, 2)), np.zeros(shape))
+
+    @classmethod
+    def from_se3(cls, T: SE3) -> SE2:
+        """Planar projection ``(x, y, yaw)`` of an SE(3) pose or batch,
+        ``yaw = atan2(R[1, 0], R[0, 0])``.
+
+        Drops z, roll and pitch (yaw as in a ZYX Euler decomposition).
+        """
+        matrix = T.rotation.matrix
+        yaw = np.arctan2(matrix[..., 1, 0], matrix[..., 0, 0])
+        return cls._make(T.translation[..., :2].copy(), np.asarray(yaw, dtype=np.float64))
 
     @classmethod
     def from_matrix(cls, matrix: npt.ArrayLike) -> SE2:

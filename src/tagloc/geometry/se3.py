@@ -14,12 +14,12 @@ from typing import TYPE_CHECKING, ClassVar, Literal, overload
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.errors import GeometryError
 from tagloc.geometry import _checks, _scalar
 from tagloc.geometry import _quatmath as quatm
 from tagloc.geometry import _so3math as so3m
 from tagloc.geometry import jacobians as jac
-from tagloc.geometry._checks import FloatArray
 from tagloc.geometry._lie import Index, LieGroup
 from tagloc.geometry.so3 import SO3
 
@@ -172,13 +172,13 @@ class SE3(LieGroup):
     def to_se2(self) -> SE2:
         """Planar projection ``(x, y, yaw)``, ``yaw = atan2(R[1, 0], R[0, 0])``.
 
-        Drops z, roll and pitch (yaw as in a ZYX Euler decomposition).
+        Drops z, roll and pitch (yaw as in a ZYX Euler decomposition). The same as
+        :meth:`SE2.from_se3`, which new code uses: this method makes ``se3`` import ``se2``
+        (a cycle, as ``se2`` imports ``se3``) and goes once its last callers use that.
         """
         from tagloc.geometry.se2 import SE2
 
-        matrix = self.rotation.matrix
-        yaw = np.arctan2(matrix[..., 1, 0], matrix[..., 0, 0])
-        return SE2._make(self.translation[..., :2].copy(), np.asarray(yaw, dtype=np.float64))
+        return SE2.from_se3(self)
 
     # ----- action ----------------------------------------------------------------------------
     @overload

@@ -18,10 +18,10 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.geometry import _quatmath as quatm
 from tagloc.geometry import _scalar
 from tagloc.geometry import _so3math as so3m
-from tagloc.geometry._checks import FloatArray
 from tagloc.geometry.se3 import SE3, _matvec
 
 #: Batches up to this size evaluate the series on plain floats.

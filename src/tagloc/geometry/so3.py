@@ -13,11 +13,11 @@ from typing import ClassVar, Literal, overload
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.errors import GeometryError
 from tagloc.geometry import _checks, _scalar
 from tagloc.geometry import _quatmath as quatm
 from tagloc.geometry import _so3math as so3m
-from tagloc.geometry._checks import FloatArray
 from tagloc.geometry._lie import Index, LieGroup
 
 

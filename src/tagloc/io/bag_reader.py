@@ -49,6 +49,7 @@ from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Literal, NamedTuple
 
+from tagloc.config import validate
 from tagloc.fileutil import atomic_path
 from tagloc.io.convert import DECODERS, Bad, DecodeOptions, decode, make_typestore
 from tagloc.io.errors import BagFormatError, BagTopicError, InputNotFoundError, RecordError
@@ -225,7 +226,12 @@ class BagSource:
             family_spec(default_family)  # validates (TagBackendError)
         self.path = Path(path)
         self._file = open_bag(self.path, cache_dir)
-        self._opts = DecodeOptions(stamp, corner_order, pixel_offset, default_family, quat_tol)
+        self._opts = validate(
+            DecodeOptions,
+            {"stamp": stamp, "corner_order": corner_order, "pixel_offset": pixel_offset,
+             "default_family": default_family, "quat_tol": quat_tol},
+            "bag reader options",
+        )  # fmt: skip
         self._on_bad = on_bad
         self.skipped: dict[str, int] = {}
         self._warned: set[tuple[str, str]] = set()

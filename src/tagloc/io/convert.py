@@ -35,17 +35,17 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
 from typing import Any, Literal, NamedTuple
 
 import cv2
 import numpy as np
 
+from tagloc._types import FloatArray
+from tagloc.config import StrictModel
 from tagloc.geometry import SE3
 from tagloc.io.errors import BagFormatError
 from tagloc.messages import (
     CameraInfoMsg,
-    FloatArray,
     GroundTruthMsg,
     ImageMsg,
     Message,
@@ -105,8 +105,7 @@ class Bad(NamedTuple):
     detail: str
 
 
-@dataclass(frozen=True, slots=True)
-class DecodeOptions:
+class DecodeOptions(StrictModel):
     """How the reader turns messages into records (see :class:`tagloc.io.BagSource`)."""
 
     stamp: Literal["header", "log"] = "header"

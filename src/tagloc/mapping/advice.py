@@ -25,7 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-FloatArray = npt.NDArray[np.float64]
+from tagloc._types import FloatArray
+
 #: Shorter stretches without a sighting are not worth a tag (m of path).
 MIN_GAP_M = 2.0
 #: A flagged tag closer than this to an anchor is uncertain because of the anchor's own sigma

@@ -48,7 +48,7 @@ from dataclasses import replace
 import numpy as np
 
 from tagloc.frames import base_tilt_deg
-from tagloc.geometry import SE3
+from tagloc.geometry import SE3, inverse_h
 from tagloc.mapping.anchors import Anchor, as_anchor
 from tagloc.mapping.calibration import (
     OdometryCalibration,
@@ -72,7 +72,6 @@ from tagloc.mapping.initialize import (
     choose_branches,
     initialize_keyframes,
     initialize_tags,
-    inverse_h,
 )
 from tagloc.mapping.lidar_survey import prepare_lidar, scan_odometry
 from tagloc.mapping.map_qa import graph_records, map_and_report

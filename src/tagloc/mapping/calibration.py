@@ -28,9 +28,9 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from tagloc.mapping.initialize import inverse_h
+from tagloc._types import FloatArray
+from tagloc.geometry import inverse_h
 
-FloatArray = npt.NDArray[np.float64]
 #: Length of :func:`calibration_vector`.
 N_CALIBRATION = 4
 

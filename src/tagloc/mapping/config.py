@@ -4,14 +4,15 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
+from tagloc.config import StrictModel
 from tagloc.frames import OdometryFrameConfig
 from tagloc.mapping.lidar_config import LidarSurveyConfig
 from tagloc.tags.covariance import NoiseModel
 
 
-class OdometryNoise(BaseModel):
+class OdometryNoise(StrictModel):
     """Noise of the odometry between two keyframes: a random walk in distance and rotation.
 
     Per axis, ``var = per_m * d + per_rad * a + floor^2`` with ``d`` the distance (m) and ``a``
@@ -27,8 +28,6 @@ class OdometryNoise(BaseModel):
     legged drives that beat these defaults, 7.6 cm tag RMS against 9.8 cm.
     """
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
     translation_var_per_m: float = Field(4e-3, ge=0.0, description="m^2 per metre")
     translation_var_per_rad: float = Field(1e-4, ge=0.0, description="m^2 per radian")
     rotation_var_per_m: float = Field(4e-4, ge=0.0, description="rad^2 per metre")
@@ -40,7 +39,7 @@ class OdometryNoise(BaseModel):
     rotation_floor_rad: float = Field(1e-4, gt=0.0)
 
 
-class GravityConfig(BaseModel):
+class GravityConfig(StrictModel):
     """Roll and pitch priors from a gravity-aligned odometry (:mod:`tagloc.mapping.gravity`).
 
     Whether the odometry is gravity-aligned, and which of its axes is up, is
@@ -57,8 +56,6 @@ class GravityConfig(BaseModel):
         independent).
     """
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
     priors: bool = True
     sigma_deg: float = Field(1.0, gt=0.0, le=45.0)
 
@@ -73,7 +70,7 @@ class GravityConfig(BaseModel):
         return data
 
 
-class MapBuildConfig(BaseModel):
+class MapBuildConfig(StrictModel):
     """How :func:`tagloc.mapping.build_tag_map` turns a survey into a tag map.
 
     Attributes
@@ -149,8 +146,6 @@ class MapBuildConfig(BaseModel):
     lidar : LidarSurveyConfig
         Scan-matching factors and map products of a survey with lidar sweeps.
     """
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
     odometry: OdometryNoise = OdometryNoise()
     pnp_noise: NoiseModel = NoiseModel()

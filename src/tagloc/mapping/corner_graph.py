@@ -25,14 +25,12 @@ from collections.abc import Mapping
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.camera import CameraModel
-from tagloc.geometry import SE3
-from tagloc.mapping.initialize import inverse_h
-from tagloc.mapping.observations import Observations, hat
-from tagloc.mapping.odometry_factors import adjoint
+from tagloc.geometry import SE3, adjoint_h, hat, inverse_h
+from tagloc.mapping.observations import Observations
 from tagloc.tags.detection import tag_object_points
 
-FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 #: An observation whose corners' whitened norm exceeds this at the linearization point is left
 #: out of that round (a false detection far off, whose Cauchy cost would still reward moving
@@ -174,7 +172,7 @@ def corner_jacobians(
     sqrt_w[gross_outliers(corner_chi(r), tag)] = 0.0
     b = -(np.nan_to_num(r) * sqrt_w[..., None]).reshape(-1, 8)
     A_tag = (J_r_xi * sqrt_w[..., None, None]).reshape(-1, 8, 6)
-    A_base = -A_tag @ adjoint(inverse_h(M_base_tag))
+    A_base = -A_tag @ adjoint_h(inverse_h(M_base_tag))
     return A_base, A_tag, b
 
 

@@ -26,15 +26,14 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
-import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.camera import CameraModel
 from tagloc.geometry import SE3
 from tagloc.mapping.initialize import consensus_rotation, rotation_angle
 from tagloc.mapping.observations import Observations
 from tagloc.mapping.tag_fit import fit_tag_pose
 
-FloatArray = npt.NDArray[np.float64]
 #: Optima closer than this (degrees) are the same tilt.
 SAME_DEG = 3.0
 #: A different tilt must fit better by this log-likelihood to replace the current one.

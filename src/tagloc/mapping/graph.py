@@ -29,16 +29,15 @@ import gtsam
 import numpy as np
 import numpy.typing as npt
 
-from tagloc.geometry import SE3
+from tagloc._types import FloatArray
+from tagloc.geometry import SE3, inverse_h
 from tagloc.mapping.anchors import anchor_default_sigmas, anchor_whitening
 from tagloc.mapping.config import MapBuildConfig
 from tagloc.mapping.gravity import add_gravity_factors
 from tagloc.mapping.gtsam_bridge import PERM, cov_from_gtsam, solver_errors
-from tagloc.mapping.initialize import inverse_h
 from tagloc.mapping.odometry_noise import odometry_whitening
 from tagloc.mapping.scan_factors import RelativePoseFactors, add_relative_factors
 
-FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 
 

@@ -38,14 +38,13 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
+from tagloc.geometry import inverse_h, log_h
 from tagloc.mapping.calibration import calibration_from_vector, corrected_steps
 from tagloc.mapping.gravity import gravity_residuals, keyframe_tilts_deg
-from tagloc.mapping.initialize import inverse_h
-from tagloc.mapping.odometry_factors import log_batch
 from tagloc.mapping.scan_factors import RelativePoseFactors
 from tagloc.mapping.whitening import AxisWhitening
 
-FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 FORMAT, VERSION = "tagloc-graph", 1
 
@@ -133,7 +132,7 @@ def factor_records(g: GraphAtSolution) -> list[dict[str, Any]]:
     if len(g.step_raw):
         Z = corrected_steps(g.step_raw, calibration_from_vector(g.c))
         B = inverse_h(g.M_map_base[:-1]) @ g.M_map_base[1:]
-        e = log_batch(inverse_h(Z) @ B)
+        e = log_h(inverse_h(Z) @ B)
         w = np.linalg.norm(g.odometry_noise.whiten(e), axis=1)
         for k in range(1, len(g.M_map_base)):
             r = e[k - 1]
@@ -145,7 +144,7 @@ def factor_records(g: GraphAtSolution) -> list[dict[str, Any]]:
                 "whitened": _num(w[k - 1], 4),
             })  # fmt: skip
     for j, M in sorted(g.held.items()):
-        r = log_batch((inverse_h(M) @ g.M_map_tag[j])[None])[0]
+        r = log_h((inverse_h(M) @ g.M_map_tag[j])[None])[0]
         noise = g.held_noise[j]
         records.append({
             "type": "anchor", "family": g.tag_keys[j][0], "tag": g.tag_keys[j][1],
@@ -176,7 +175,7 @@ def _scan_records(g: GraphAtSolution, t_s: npt.NDArray[np.floating[Any]]) -> lis
     if f is None or len(f) == 0:
         return []
     B = inverse_h(g.M_map_base[f.a]) @ g.M_map_base[f.b]
-    e = log_batch(inverse_h(f.M_a_b) @ B)
+    e = log_h(inverse_h(f.M_a_b) @ B)
     w = np.linalg.norm(np.einsum("nij,nj->ni", f.sqrt_information, e), axis=1)
     records = []
     for a, b, loop, r, wi in zip(f.a, f.b, f.loop, e, w, strict=True):

@@ -25,11 +25,10 @@ from __future__ import annotations
 
 import gtsam
 import numpy as np
-import numpy.typing as npt
 
-from tagloc.mapping.observations import hat
+from tagloc._types import FloatArray
+from tagloc.geometry import hat
 
-FloatArray = npt.NDArray[np.float64]
 _Z = np.array([0.0, 0.0, 1.0])
 
 

@@ -19,10 +19,9 @@ import gtsam
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.geometry import SE3
 from tagloc.mapping.survey import MappingError
-
-FloatArray = npt.NDArray[np.float64]
 
 #: ``v_gtsam = v_tagloc[PERM]`` and ``C_gtsam = C_tagloc[PERM][:, PERM]``; the permutation is
 #: its own inverse.

@@ -27,10 +27,11 @@ from collections.abc import Mapping
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
+from tagloc.geometry import inverse_h as inverse_h  # re-exported for modules not yet moved
 from tagloc.mapping.observations import Observations
 from tagloc.mapping.survey import MappingError
 
-FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 
 INLIER_RADIUS_M = 0.5
@@ -41,16 +42,6 @@ CONSENSUS_ANGLE_RAD = np.radians(8.0)
 YAW_BASE_M = 2.0
 #: Re-seating a keyframe may move it this much plus a fraction of the distance since the last fix.
 RESEAT_TOLERANCE_M, RESEAT_TOLERANCE_PER_M = 1.0, 0.1
-
-
-def inverse_h(M: FloatArray) -> FloatArray:
-    """Inverse of rigid ``(..., 4, 4)`` transforms."""
-    out = np.zeros_like(M)
-    R_t = np.swapaxes(M[..., :3, :3], -1, -2)
-    out[..., :3, :3] = R_t
-    out[..., :3, 3] = -np.einsum("...ij,...j->...i", R_t, M[..., :3, 3])
-    out[..., 3, 3] = 1.0
-    return out
 
 
 def rotation_angle(R_a: FloatArray, R_b: FloatArray) -> FloatArray:

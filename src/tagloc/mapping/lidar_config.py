@@ -4,10 +4,12 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
+
+from tagloc.config import StrictModel
 
 
-class LidarSurveyConfig(BaseModel):
+class LidarSurveyConfig(StrictModel):
     """How :mod:`tagloc.mapping.lidar_survey` turns a survey's sweeps into factors and maps.
 
     Attributes
@@ -63,8 +65,6 @@ class LidarSurveyConfig(BaseModel):
     robust_k : float
         Robust kernel on every scan-matching factor, width in sigmas.
     """
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
     enabled: bool = True
     keyframe_distance_m: float = Field(0.75, gt=0.0)

@@ -13,13 +13,12 @@ from typing import Any
 
 import numpy as np
 
-from tagloc.geometry import SE3
+from tagloc.geometry import SE3, inverse_h
 from tagloc.mapping.advice import coverage_gaps, uncertainty_advice
 from tagloc.mapping.config import MapBuildConfig
 from tagloc.mapping.exclude import survey_start_ns
 from tagloc.mapping.graph import GraphSolution
 from tagloc.mapping.graph_export import GraphAtSolution, factor_records
-from tagloc.mapping.initialize import inverse_h
 from tagloc.mapping.observations import Observations
 from tagloc.mapping.odometry_noise import odometry_whitening
 from tagloc.mapping.refine import Priors

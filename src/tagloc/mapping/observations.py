@@ -20,8 +20,9 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.camera import CameraModel
-from tagloc.geometry import SE3
+from tagloc.geometry import SE3, hat
 from tagloc.mapping.survey import MappingError, Survey, TagKey
 from tagloc.tags.covariance import NoiseModel
 from tagloc.tags.detection import TagDetection, tag_object_points
@@ -29,7 +30,6 @@ from tagloc.tags.pnp import estimate_tag_poses
 
 logger = logging.getLogger(__name__)
 
-FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 Progress = Callable[[int, int], None]
 #: Detections per call of :func:`estimate_tag_poses`.
@@ -89,14 +89,6 @@ def interpolate_odometry(survey: Survey, stamps_ns: IntArray) -> SE3:
     alpha = (stamps_ns - t[idx]) / (t[idx + 1] - t[idx]).astype(np.float64)
     T = survey.T_odom_base
     return T[idx].interpolate_rt(T[idx + 1], np.clip(alpha, 0.0, 1.0))
-
-
-def hat(v: FloatArray) -> FloatArray:
-    """``(..., 3, 3)`` skew-symmetric matrices of ``(..., 3)`` vectors (``hat(a) @ b = a x b``)."""
-    out = np.zeros((*v.shape[:-1], 3, 3))
-    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
-    out[..., 1, 0], out[..., 2, 0], out[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
-    return out
 
 
 def pixel_covariance(

@@ -26,47 +26,20 @@ because trajectory and calibration are strongly coupled).
 from __future__ import annotations
 
 import numpy as np
-import numpy.typing as npt
 
-from tagloc.errors import GeometryError
-from tagloc.geometry import SE3
+from tagloc._types import FloatArray
+from tagloc.geometry import adjoint_h, inverse_h, log_h
+from tagloc.geometry.matrices import as_se3
 from tagloc.mapping.calibration import (
     N_CALIBRATION,
     calibration_from_vector,
     corrected_step_jacobians,
     corrected_steps,
 )
-from tagloc.mapping.initialize import inverse_h
-from tagloc.mapping.observations import hat
 from tagloc.mapping.whitening import AxisWhitening
 
-FloatArray = npt.NDArray[np.float64]
-
-
-def log_batch(M: FloatArray) -> FloatArray:
-    """``(n, 6)`` SE(3) logarithm ``[x, y, z, rx, ry, rz]`` of ``(n, 4, 4)`` rigid transforms."""
-    if len(M) == 0:
-        return np.zeros((0, 6))
-    return np.asarray(_se3(M).log())
-
-
-def _se3(M: FloatArray) -> SE3:
-    """``M`` as an SE3 batch; projected onto SO(3) only if rounding has left it off (the SVD
-    of every matrix was a tenth of the refinement's time)."""
-    try:
-        return SE3.from_matrix(M)
-    except GeometryError:
-        return SE3.from_matrix(M, normalize=True)
-
-
-def adjoint(M: FloatArray) -> FloatArray:
-    """``(n, 6, 6)`` adjoint of ``T = (R, t)`` in tagloc order: ``[[R, hat(t) R], [0, R]]``."""
-    R, t = M[:, :3, :3], M[:, :3, 3]
-    A = np.zeros((len(M), 6, 6))
-    A[:, :3, :3] = R
-    A[:, 3:, 3:] = R
-    A[:, :3, 3:] = hat(t) @ R
-    return A
+#: The names modules that have not moved to :mod:`tagloc.geometry.matrices` still import here.
+adjoint, log_batch, _se3 = adjoint_h, log_h, as_se3
 
 
 def odometry_residuals(
@@ -75,7 +48,7 @@ def odometry_residuals(
     """``(K-1, 6)`` whitened odometry errors ``e_k`` (module docstring)."""
     Z = corrected_steps(step_raw, calibration_from_vector(c))
     B = inverse_h(M_map_base[:-1]) @ M_map_base[1:]
-    return noise.whiten(log_batch(inverse_h(Z) @ B))
+    return noise.whiten(log_h(inverse_h(Z) @ B))
 
 
 def linearize_odometry(
@@ -117,17 +90,17 @@ def linearize_odometry(
     Z = corrected_steps(step_raw, calibration_from_vector(c))
     B = inverse_h(M_map_base[:-1]) @ M_map_base[1:]
     E = inverse_h(Z) @ B
-    e, J_e_E = _se3(E).log(jacobians=True)  # J_r^-1(e)
+    e, J_e_E = as_se3(E).log(jacobians=True)  # J_r^-1(e)
     A_next = noise.whiten_jacobian(J_e_E)
-    A_prev = -noise.whiten_jacobian(J_e_E @ adjoint(inverse_h(B)))
+    A_prev = -noise.whiten_jacobian(J_e_E @ adjoint_h(inverse_h(B)))
     if not calibrate:
         return noise.whiten(e), A_prev, A_next, None
     D = corrected_step_jacobians(step_raw, Z)
-    A_c = -noise.whiten_jacobian(J_e_E @ adjoint(inverse_h(E)) @ D)
+    A_c = -noise.whiten_jacobian(J_e_E @ adjoint_h(inverse_h(E)) @ D)
     return noise.whiten(e), A_prev, A_next, A_c
 
 
 def prior_residuals(M: FloatArray, M_prior: FloatArray, noise: AxisWhitening) -> FloatArray:
     """``(n, 6)`` whitened ``Log(M_prior^-1 M)`` of pose priors (Jacobian: the whitening of the
     identity)."""
-    return noise.whiten(log_batch(inverse_h(M_prior) @ M))
+    return noise.whiten(log_h(inverse_h(M_prior) @ M))

@@ -24,9 +24,9 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from tagloc.geometry import SO3
+from tagloc.geometry import SO3, inverse_h
 from tagloc.mapping.config import OdometryNoise
-from tagloc.mapping.initialize import inverse_h, rotation_angle
+from tagloc.mapping.initialize import rotation_angle
 from tagloc.mapping.whitening import AxisWhitening
 
 FloatArray = npt.NDArray[np.float64]

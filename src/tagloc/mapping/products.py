@@ -18,9 +18,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
+from tagloc._types import FloatArray
+from tagloc.config import StrictModel
 from tagloc.geometry import SE3
 from tagloc.lidar import OccupancyConfig, OccupancyGrid, build_occupancy, build_premap
 from tagloc.mapping.lidar_config import LidarSurveyConfig
@@ -28,10 +29,8 @@ from tagloc.mapping.lidar_survey import deskewed_points
 from tagloc.mapping.report import BuildReport
 from tagloc.mapping.survey import MappingError, Survey
 
-FloatArray = npt.NDArray[np.float64]
 
-
-class ProductsConfig(BaseModel):
+class ProductsConfig(StrictModel):
     """How the premap and the occupancy grid are made.
 
     Attributes
@@ -43,8 +42,6 @@ class ProductsConfig(BaseModel):
     occupancy : OccupancyConfig
         Resolution, height band, log-odds of the grid (:class:`tagloc.lidar.OccupancyConfig`).
     """
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
     premap_voxel_m: float = Field(0.1, gt=0.0)
     max_range_m: float = Field(20.0, gt=0.0)

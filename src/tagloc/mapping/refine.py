@@ -28,10 +28,10 @@ from dataclasses import dataclass, field, replace
 
 import gtsam
 import numpy as np
-import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.camera import CameraModel
-from tagloc.geometry import SE3
+from tagloc.geometry import SE3, inverse_h
 from tagloc.mapping.anchors import anchor_default_sigmas, anchor_whitening
 from tagloc.mapping.calibration import N_CALIBRATION
 from tagloc.mapping.config import MapBuildConfig
@@ -47,7 +47,7 @@ from tagloc.mapping.flips import flip_stuck_tags
 from tagloc.mapping.graph import GraphSolution, L, X
 from tagloc.mapping.gravity import gravity_jacobians, gravity_residuals
 from tagloc.mapping.gtsam_bridge import solver_errors
-from tagloc.mapping.initialize import inverse_h, rotation_angle
+from tagloc.mapping.initialize import rotation_angle
 from tagloc.mapping.observations import Observations
 from tagloc.mapping.odometry_factors import (
     linearize_odometry,
@@ -59,7 +59,6 @@ from tagloc.mapping.scan_factors import RelativePoseFactors, linearize_relative,
 from tagloc.mapping.whitening import AxisWhitening
 
 logger = logging.getLogger(__name__)
-FloatArray = npt.NDArray[np.float64]
 #: Stop when no tag moves more than this (m) or turns more than this (rad) in a round.
 STEP_TOL_M, STEP_TOL_RAD = 1e-4, 1e-4
 #: Key of the odometry calibration vector.

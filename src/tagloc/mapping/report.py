@@ -18,13 +18,11 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.camera import CameraModel
-from tagloc.geometry import SE3
-from tagloc.mapping.initialize import inverse_h
+from tagloc.geometry import SE3, inverse_h
 from tagloc.mapping.observations import Observations
 from tagloc.tags.detection import tag_object_points
-
-FloatArray = npt.NDArray[np.float64]
 
 
 @dataclass(frozen=True, slots=True)

@@ -23,9 +23,10 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+from pydantic import ConfigDict
 
 from tagloc.camera import CameraModel
-from tagloc.config import clip_message, parse_yaml_mapping
+from tagloc.config import StrictModel, clip_message, parse_yaml_mapping
 from tagloc.errors import TaglocError
 from tagloc.geometry import SE3
 from tagloc.mapping.survey import CameraFrame, MappingError, Survey, TagKey
@@ -47,9 +48,10 @@ class TagRemap:
     end_ns: int
 
 
-@dataclass(frozen=True, slots=True)
-class RigConfig:
-    """What a tagSLAM configuration says about the rig and the map."""
+class RigConfig(StrictModel):
+    """What a tagSLAM configuration says about the rig and the map (finite values only)."""
+
+    model_config = ConfigDict(arbitrary_types_allowed=True)
 
     anchors: dict[int, SE3]
     T_body_odom: SE3 | None
@@ -124,12 +126,12 @@ def parse_tagslam(text: str, source: str) -> RigConfig:
         detail = clip_message(f"{type(exc).__name__}: {exc}")
         raise MappingError(f"{where}: not the tagSLAM layout ({detail})") from None
     return RigConfig(
-        anchors,
-        T_body_odom,
-        frozenset(ignore),
-        default_size,
-        sizes,
-        _tag_remaps(data.get("tag_id_remap") or [], f"{source}: tag_id_remap"),
+        anchors=anchors,
+        T_body_odom=T_body_odom,
+        ignore_tags=frozenset(ignore),
+        default_tag_size=default_size,
+        tag_sizes=sizes,
+        tag_remaps=_tag_remaps(data.get("tag_id_remap") or [], f"{source}: tag_id_remap"),
     )
 
 

@@ -17,10 +17,9 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.errors import TaglocError
 from tagloc.geometry import SE3
-
-FloatArray = npt.NDArray[np.float64]
 
 
 class SurveyScanError(TaglocError, ValueError):

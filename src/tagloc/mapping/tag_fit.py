@@ -18,6 +18,7 @@ from collections.abc import Mapping
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.camera import CameraModel
 from tagloc.geometry import SE3
 from tagloc.mapping.corner_graph import (
@@ -28,7 +29,6 @@ from tagloc.mapping.corner_graph import (
 )
 from tagloc.mapping.observations import Observations
 
-FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 #: Width of the Cauchy kernel on a corner's whitened 2-D residual (sigmas).
 KERNEL_K = 3.0

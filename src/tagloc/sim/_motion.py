@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-FloatArray = NDArray[np.float64]
+from tagloc._types import FloatArray
 
 #: Turns sharper than this always stop and turn in place, even with ``corner_radius > 0``.
 MAX_ROUNDED_TURN_RAD = math.radians(120.0)

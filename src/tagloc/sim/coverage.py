@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.config import FieldPathError
 from tagloc.errors import SimulationError
 from tagloc.sim.drive import simulate_drive
@@ -41,7 +42,6 @@ from tagloc.sim.world import World
 
 __all__ = ["CoverageGap", "RouteCoverage", "gaps_csv", "route_coverage"]
 
-FloatArray = npt.NDArray[np.float64]
 S = 1_000_000_000
 
 

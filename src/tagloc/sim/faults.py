@@ -52,11 +52,11 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from tagloc.messages import Message
+from tagloc.units import S_NS
 
 __all__ = ["ClockJump", "DropMessages", "DuplicateMessages", "StreamFault", "apply_faults"]
 
 logger = logging.getLogger(__name__)
-S_NS = 1_000_000_000
 Stream = Iterable[tuple[str, Message]]
 
 

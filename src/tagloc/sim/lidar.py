@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.geometry import SE3, SO3
 from tagloc.lidar.cloud import voxel_downsample
 from tagloc.messages import PointCloudMsg
@@ -41,12 +42,11 @@ from tagloc.sim.lidar_cast import (
 from tagloc.sim.people import Person, people_xy
 from tagloc.sim.robot import LidarConfig
 from tagloc.sim.world import Wall, World
+from tagloc.units import S_NS
 
 __all__ = ["LIDAR_FRAME", "LidarSimulator", "Sweep", "premap_from_world"]
 
-FloatArray = npt.NDArray[np.float64]
 LIDAR_FRAME = "lidar"
-S_NS = 1_000_000_000
 #: ``xy_yaw_at(stamps_ns) -> (K, 3)``: the base's true planar pose in ``map`` (``x, y, yaw``).
 PoseFunction = Callable[[npt.NDArray[np.int64]], FloatArray]
 _INTENSITY = {HIT_WALL: 100.0, HIT_FLOOR: 60.0, HIT_PERSON: 40.0, HIT_GLASS: 10.0}

@@ -28,6 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
+
 __all__ = [
     "HIT_FLOOR",
     "HIT_GLASS",
@@ -40,7 +42,6 @@ __all__ = [
     "cast_rays",
 ]
 
-FloatArray = npt.NDArray[np.float64]
 #: What a ray returned from (:attr:`CastResult.kind`).
 HIT_NONE, HIT_WALL, HIT_FLOOR, HIT_PERSON, HIT_GLASS = 0, 1, 2, 3, 4
 MATERIALS = {"wall": 0, "glass": 1, "mirror": 2}

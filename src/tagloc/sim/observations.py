@@ -36,9 +36,11 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
+from tagloc._types import FloatArray
 from tagloc.camera import CameraModel
+from tagloc.config import StrictModel
 from tagloc.geometry import SE3
 from tagloc.sim.drive import Drive
 from tagloc.sim.world import World
@@ -52,7 +54,6 @@ __all__ = [
     "visible_tags",
 ]
 
-FloatArray = npt.NDArray[np.float64]
 
 #: Ground truth is sampled for this many frames at a time.
 _CHUNK = 256
@@ -60,10 +61,8 @@ _CHUNK = 256
 _WALL_CLEARANCE_M = 0.02
 
 
-class ObservationConfig(BaseModel):
+class ObservationConfig(StrictModel):
     """How the simulated detector sees tags (see the module docstring)."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
     pixel_sigma_px: float = Field(default=0.3, ge=0.0, description="corner noise, px per axis")
     max_range_m: float = Field(default=8.0, gt=0.0)

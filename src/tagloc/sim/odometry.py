@@ -23,23 +23,20 @@ with foot slip (see the reference notes, section 3, "Odometry sources").
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
 from typing import Annotated, Literal
 
 import numpy as np
-from numpy.typing import NDArray
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
+from tagloc._types import FloatArray
+from tagloc.config import StrictModel
 from tagloc.geometry import SE3
 from tagloc.sim.trajectory import se3_from_xy_yaw
 
-FloatArray = NDArray[np.float64]
 
-
-class _DriftConfig(BaseModel):
+class _DriftConfig(StrictModel):
     """Fields shared by every model. Units in the field names: fractions, deg, m."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
     seed: int = Field(default=0, ge=0)
     scale_error: float = Field(default=0.01, gt=-0.5, lt=0.5)
     yaw_scale_error: float = Field(default=0.005, gt=-0.5, lt=0.5)
@@ -79,11 +76,11 @@ ODOMETRY_MODELS: dict[str, type[_DriftConfig]] = {
 }
 
 
-@dataclass(frozen=True, slots=True)
-class DriftParameters:
+class DriftParameters(StrictModel):
     """Drift model parameters in SI units (radians); see the module docstring for the model.
 
-    A wheel model is the special case ``lateral_drift = slip_rate_per_m = 0``.
+    A wheel model is the special case ``lateral_drift = slip_rate_per_m = 0``. Built from a
+    world file's section by :meth:`from_config`; every value is finite.
     """
 
     scale_error: float = 0.0
@@ -100,16 +97,16 @@ class DriftParameters:
     @classmethod
     def from_config(cls, config: WheelOdometryConfig | LeggedOdometryConfig) -> DriftParameters:
         """Unpack a world-file odometry section (degrees to radians)."""
-        extra = DriftParameters()
+        extra: dict[str, float] = {}
         if isinstance(config, LeggedOdometryConfig):
-            extra = cls(
-                lateral_drift=config.lateral_drift,
-                slip_rate_per_m=config.slip_rate_per_m,
-                slip_sigma_xy_m=config.slip_sigma_xy_m,
-                slip_sigma_yaw=math.radians(config.slip_sigma_yaw_deg),
-            )
-        return replace(
-            extra,
+            extra = {
+                "lateral_drift": config.lateral_drift,
+                "slip_rate_per_m": config.slip_rate_per_m,
+                "slip_sigma_xy_m": config.slip_sigma_xy_m,
+                "slip_sigma_yaw": math.radians(config.slip_sigma_yaw_deg),
+            }
+        return cls(
+            **extra,
             scale_error=config.scale_error,
             yaw_scale_error=config.yaw_scale_error,
             yaw_bias_per_m=math.radians(config.yaw_bias_deg_per_m),

@@ -15,14 +15,13 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-import numpy.typing as npt
 from pydantic import Field, model_validator
 
+from tagloc._types import FloatArray
 from tagloc.config import FieldPathError, StrictModel
 
 __all__ = ["Person", "RandomWalk", "crowd_around", "people_xy"]
 
-FloatArray = npt.NDArray[np.float64]
 _WALK_STEP_S = 0.5
 
 

@@ -48,12 +48,12 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.camera import CameraModel
 from tagloc.errors import SimulationError
 from tagloc.geometry import SE3
 from tagloc.sim.drive import Drive
 from tagloc.sim.render_config import RenderConfig
-from tagloc.sim.render_geometry import FloatArray
 from tagloc.sim.render_pipeline import render_image
 from tagloc.sim.render_scene import Scene, scene_from_world, scene_of_tags
 from tagloc.sim.render_tags import TagTruth

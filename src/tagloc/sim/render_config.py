@@ -12,10 +12,12 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
+
+from tagloc.config import StrictModel
 
 
-class RenderConfig(BaseModel):
+class RenderConfig(StrictModel):
     """How :mod:`tagloc.sim.render` turns a scene into an 8-bit gray image.
 
     Sampling
@@ -52,8 +54,6 @@ class RenderConfig(BaseModel):
         shot noise): conversion gain for Poisson shot noise, variance ``signal / electrons_per_dn``
         DN^2. ``seed`` (0): noise seed when the caller gives none.
     """
-
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
     supersample: int = Field(default=2, ge=1, le=8)
     background_scale: float = Field(default=0.5, gt=0.0, le=1.0)

@@ -21,10 +21,11 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.camera import CameraModel
 from tagloc.geometry import SE3
 from tagloc.sim.render_config import RenderConfig
-from tagloc.sim.render_geometry import Float32Array, FloatArray, LruCache, RayGrid
+from tagloc.sim.render_geometry import Float32Array, LruCache, RayGrid
 
 #: Shot noise is sampled exactly (Poisson) below this mean electron count.
 POISSON_BELOW_E = 100.0

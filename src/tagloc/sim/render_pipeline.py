@@ -10,12 +10,13 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.camera import CameraModel
 from tagloc.geometry import SE3
 from tagloc.sim.render_background import render_background
 from tagloc.sim.render_config import RenderConfig
 from tagloc.sim.render_effects import background_flow, blur, expose, line_kernel, point_flow
-from tagloc.sim.render_geometry import Float32Array, FloatArray, ray_grid
+from tagloc.sim.render_geometry import Float32Array, ray_grid
 from tagloc.sim.render_scene import Scene, view_walls
 from tagloc.sim.render_tags import TagLayer, TagTruth, rasterize_tag, tags_in_view
 

@@ -14,9 +14,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.camera import CameraModel
 from tagloc.geometry import SE3
-from tagloc.sim.render_geometry import Float32Array, FloatArray, polygon_bboxes
+from tagloc.sim.render_geometry import Float32Array, polygon_bboxes
 from tagloc.sim.world import World
 
 #: Material codes.

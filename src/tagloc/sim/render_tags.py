@@ -20,12 +20,12 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from tagloc._types import FloatArray
 from tagloc.camera import CameraModel
 from tagloc.geometry import SE3, SO3
 from tagloc.sim.render_config import RenderConfig
 from tagloc.sim.render_geometry import (
     Float32Array,
-    FloatArray,
     RayGrid,
     boxes_overlap,
     polygon_bboxes,

@@ -31,7 +31,9 @@ R_BODY_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 
 
 class Intrinsics(StrictModel):
-    """Pinhole intrinsics in pixels (OpenCV: centre of the top-left pixel at (0, 0))."""
+    """The world file's ``intrinsics`` section: pinhole intrinsics in pixels (OpenCV: centre of
+    the top-left pixel at (0, 0)). Only the file's fields: the camera they describe is
+    :meth:`Camera.camera_model`, a :mod:`tagloc.camera` model."""
 
     fx: float = Field(ge=1.0, le=1e5)
     fy: float = Field(ge=1.0, le=1e5)
@@ -119,7 +121,11 @@ class CameraMount(Mount):
 
 
 class Camera(StrictModel):
-    """A camera on the robot: intrinsics, distortion, frame rate and mounting."""
+    """The world file's camera on the robot: intrinsics, distortion, frame rate and mounting.
+
+    The camera itself (camera matrix, projection, undistortion) is the :mod:`tagloc.camera`
+    model :meth:`camera_model` builds from the file's sections.
+    """
 
     intrinsics: Intrinsics
     distortion: Distortion = Distortion()
@@ -127,7 +133,7 @@ class Camera(StrictModel):
     T_base_cam: CameraMount
 
     def camera_model(self) -> CameraModel:
-        """This camera as a :mod:`tagloc.camera` model (project, undistort, rays)."""
+        """This camera as a :mod:`tagloc.camera` model (``K``, project, undistort, rays)."""
         i, coeffs = self.intrinsics, self.distortion.coefficients
         if self.distortion.model == "equidistant":
             k1, k2, k3, k4 = coeffs
@@ -157,11 +163,6 @@ class Camera(StrictModel):
             p2=p2,
             k3=k3,
         )
-
-    def K(self) -> np.ndarray:
-        """The 3x3 camera matrix."""
-        i = self.intrinsics
-        return np.array([[i.fx, 0.0, i.cx], [0.0, i.fy, i.cy], [0.0, 0.0, 1.0]])
 
 
 class LidarMount(Mount):

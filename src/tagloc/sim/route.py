@@ -10,12 +10,11 @@ from collections.abc import Mapping
 from typing import Annotated, Any
 
 import numpy as np
-from numpy.typing import NDArray
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
+from pydantic import BeforeValidator, Field, model_validator
 
-from tagloc.config import short_repr
+from tagloc._types import FloatArray
+from tagloc.config import StrictModel, short_repr
 
-FloatArray = NDArray[np.float64]
 #: Largest coordinate of a world, metres (a building, not a planet).
 MAX_COORDINATE_M = 1e5
 #: Longest dwell at a waypoint, seconds.
@@ -44,10 +43,9 @@ def _check_target(value: Any) -> Any:
     )
 
 
-class Waypoint(BaseModel):
+class Waypoint(StrictModel):
     """A route waypoint: ``at`` (checkpoint name or ``[x, y]`` in map), optional ``dwell`` (s)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
     at: Annotated[str | tuple[float, float], BeforeValidator(_check_target)]
     dwell: float | None = Field(default=None, ge=0.0, le=MAX_DWELL_S)
 
@@ -57,10 +55,9 @@ class Waypoint(BaseModel):
         return data if isinstance(data, dict) else {"at": data}
 
 
-class RouteConfig(BaseModel):
+class RouteConfig(StrictModel):
     """The ``route`` section of a world file (units: m, s, rad; see the module docstring)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
     waypoints: tuple[Waypoint, ...] = Field(min_length=2)
     speed: float = Field(ge=0.01, le=5.0)
     accel_max: float = Field(default=0.5, ge=0.01, le=20.0)

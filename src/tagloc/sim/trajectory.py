@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from tagloc._types import FloatArray
 from tagloc.geometry import SE3, SO3
 from tagloc.sim._motion import (
     ARC,
@@ -37,8 +38,6 @@ from tagloc.sim._motion import (
     _readonly,
 )
 from tagloc.sim.route import RouteConfig, route_points
-
-FloatArray = NDArray[np.float64]
 
 
 @dataclass(frozen=True, slots=True)

@@ -12,9 +12,10 @@ from collections import deque
 from dataclasses import dataclass
 from enum import StrEnum
 
+from tagloc.units import S_NS
+
 __all__ = ["FixQualityMonitor", "InputHealth", "Liveness", "QualityState", "QualityVerdict"]
 
-S_NS = 1_000_000_000
 _EMA = 0.05  # weight of the newest interval in the rate estimate
 
 

@@ -31,9 +31,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import IntEnum
 
+from tagloc.units import S_NS
+
 __all__ = ["Ladder", "LadderTransition", "Level"]
 
-S_NS = 1_000_000_000
 
 
 class Level(IntEnum):

@@ -23,10 +23,10 @@ from tagloc.supervise.health import (
     QualityVerdict,
 )
 from tagloc.supervise.ladder import Ladder, LadderTransition, Level
+from tagloc.units import S_NS
 
 __all__ = ["EstimatorState", "FixSourceSpec", "StatusReport", "Supervisor"]
 
-S_NS = 1_000_000_000
 ODOMETRY = "odometry"
 
 

@@ -16,6 +16,7 @@ from itertools import pairwise
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.camera import CameraModel
 from tagloc.geometry import SE3
 from tagloc.geometry.small_batch import row_norms, se3_minus, se3_plus
@@ -28,7 +29,6 @@ from tagloc.tags.covariance import (
 )
 from tagloc.tags.estimates import _range_and_view_angle
 
-FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
 
 #: A refined alternative within this rotation angle of the best one is the same minimum.

@@ -13,9 +13,10 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.camera import CameraModel
+from tagloc.geometry import hat
 
-FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
 
 #: ``stop_early(R, t, sse) -> (freeze, settle)`` of :func:`refine_poses`.
@@ -52,26 +53,13 @@ class Refinement:
     stopped: BoolArray
 
 
-#: ``[v]x.reshape(9) = v @ _HAT_BASIS``: each entry is one component (or zero), exactly.
-_HAT_BASIS = np.array(
-    [
-        [0.0, 0.0, 0.0, 0.0, 0.0, -1.0, 0.0, 1.0, 0.0],
-        [0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0],
-        [0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-    ]
-)
 _EYE3 = np.eye(3)
-
-
-def _hat(v: FloatArray) -> FloatArray:
-    """``[v]x`` of (..., 3) vectors, (..., 3, 3)."""
-    return np.asarray(v @ _HAT_BASIS).reshape(*v.shape[:-1], 3, 3)
 
 
 def _cayley(phi: FloatArray) -> FloatArray:
     """Rotations ``cay(phi)`` (K, 3, 3): ``Exp(phi)`` to first order, exactly orthonormal."""
     half = 0.5 * phi
-    A = _hat(half)
+    A = hat(half)
     scale = 2.0 / (1.0 + np.einsum("ki,ki->k", half, half))
     return np.asarray(_EYE3 + scale[:, None, None] * (A + A @ A), dtype=np.float64)
 
@@ -90,7 +78,7 @@ def _residuals(
     """
     k, n = points_obj.shape[:2]
     if neg_hat_obj is None:
-        neg_hat_obj = _hat(-points_obj)
+        neg_hat_obj = hat(-points_obj)
     points_cam = np.einsum("kij,knj->kni", R, points_obj) + t[:, None, :]
     px, J_px_p = camera.project_with_jacobian(points_cam.reshape(-1, 3))
     J_p_xi = np.empty((k, n, 3, 6))
@@ -158,7 +146,7 @@ def refine_poses(
     n = points_obj.shape[-2]
     points = np.broadcast_to(points_obj, (k, n, 3))
     observed = np.broadcast_to(pixels, (k, n, 2))
-    neg_hat_obj = np.broadcast_to(_hat(-points_obj), (k, n, 3, 3))
+    neg_hat_obj = np.broadcast_to(hat(-points_obj), (k, n, 3, 3))
     # arrays are replaced, never written: the initial ones stay as they were
     R = R_init = np.array(R_cam_obj, dtype=np.float64)
     t = t_init = np.array(t_cam_obj, dtype=np.float64)

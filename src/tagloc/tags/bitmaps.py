@@ -16,10 +16,9 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.tags.errors import TagInputError
 from tagloc.tags.families import family_spec, opencv_dictionary, opencv_quarter_turns
-
-FloatArray = npt.NDArray[np.float64]
 
 
 def tag_bitmap(

@@ -44,12 +44,12 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
+from tagloc._types import FloatArray
+from tagloc.config import StrictModel
 from tagloc.geometry import SE3, cov_compose, cov_inverse, se3_right_jacobian_inv
 from tagloc.geometry.small_batch import row_norms
-
-FloatArray = npt.NDArray[np.float64]
 
 _EPS = np.zeros((3, 3, 3))
 _EPS[0, 1, 2] = _EPS[1, 2, 0] = _EPS[2, 0, 1] = 1.0
@@ -57,7 +57,7 @@ _EPS[0, 2, 1] = _EPS[2, 1, 0] = _EPS[1, 0, 2] = -1.0
 _EPS9 = _EPS.reshape(3, 9)  # (i, jk)
 
 
-class NoiseModel(BaseModel):
+class NoiseModel(StrictModel):
     """Pixel-noise model and covariance inflation parameters (``localizer.yaml``: ``noise``).
 
     Attributes
@@ -77,8 +77,6 @@ class NoiseModel(BaseModel):
     second_order : bool
         Add the ``phi x rho`` term (step 3 of the module docstring); default True.
     """
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
     sigma_px: float = Field(0.5, gt=0.0)
     view_angle_gain: float = Field(0.05, ge=0.0)

@@ -41,10 +41,9 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.tags.errors import TagInputError
 from tagloc.tags.families import family_spec
-
-FloatArray = npt.NDArray[np.float64]
 
 #: Corner labels in tagloc order; ``"_".join(CORNER_LABELS)`` is the native ``order``.
 CORNER_LABELS: tuple[str, str, str, str] = ("tl", "tr", "br", "bl")

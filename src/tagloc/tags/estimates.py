@@ -10,12 +10,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.geometry import SE3
 from tagloc.geometry.small_batch import row_norms
-
-FloatArray = npt.NDArray[np.float64]
 
 
 def _range_and_view_angle(R: FloatArray, t: FloatArray) -> tuple[FloatArray, FloatArray]:

@@ -104,7 +104,9 @@ class GateConfig(BaseModel):
         3 dof).
     """
 
-    model_config = ConfigDict(extra="forbid")
+    # StrictModel's settings, spelled out: localize's GatesConfig derives from StrictModel and
+    # from this class, an order that cannot hold if this class were a StrictModel too.
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
     max_reproj_err_px: float = Field(2.0, gt=0.0)
     max_range_m: float = Field(8.0, gt=0.0)

@@ -25,8 +25,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.camera import CameraModel
 from tagloc.geometry import SE3
 from tagloc.tags._frame import estimate_frame, joint_rows
@@ -45,7 +45,6 @@ from tagloc.tags.gates import (
 )
 from tagloc.tags.pnp import JointPoseEstimate, TagPoseEstimate, estimate_joint_pose
 
-FloatArray = npt.NDArray[np.float64]
 _E_Z = np.array([0.0, 0.0, 1.0])
 
 

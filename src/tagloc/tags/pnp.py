@@ -41,6 +41,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.camera import CameraModel
 from tagloc.geometry import SE3
 from tagloc.geometry.small_batch import row_norms
@@ -67,7 +68,6 @@ __all__ = [
     "tag_estimates",
 ]
 
-FloatArray = npt.NDArray[np.float64]
 _EYE3 = np.eye(3)
 
 

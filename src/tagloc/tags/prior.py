@@ -16,10 +16,10 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from tagloc.geometry._so3math import hat
+from tagloc._types import FloatArray
+from tagloc.geometry import hat
 from tagloc.tags.estimates import TagPoseEstimate
 
-FloatArray = npt.NDArray[np.float64]
 _EYE2, _EYE3 = np.eye(2), np.eye(3)
 
 
