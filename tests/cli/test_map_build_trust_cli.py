@@ -45,7 +45,10 @@ def test_export_graph_exclude_and_flags(tmp_path: Path) -> None:
     obs = [r for r in records if r["type"] == "observation"]
     assert all(r["tag"] != 13 and r["t_s"] > 1.0 for r in obs)
     (anchor,) = [r for r in records if r["type"] == "anchor"]
-    np.testing.assert_allclose(anchor["sigma"], [0.001] * 3 + [np.radians(0.5)] * 3, rtol=1e-6)
+    # with gravity priors the anchor's tilt is gravity's: its sigmas are along map's axes, the
+    # tilt free (0.1 rad), the heading the anchor's own
+    expected = [0.001] * 3 + [0.1, 0.1, np.radians(0.5)]
+    np.testing.assert_allclose(anchor["sigma"], expected, rtol=1e-6)
     gravity = [r for r in records if r["type"] == "gravity"]
     assert all(
         r["whitened"]

@@ -21,11 +21,12 @@ from tagloc.mapping.calibration import (
     fit_calibration,
 )
 from tagloc.mapping.corner_graph import corner_jacobians, gross_outliers, linearize_corners
-from tagloc.mapping.graph import odometry_sigmas
 from tagloc.mapping.gtsam_bridge import cov_from_gtsam, cov_to_gtsam, from_pose3, to_pose3
 from tagloc.mapping.initialize import consensus_rotation
 from tagloc.mapping.observations import collect_observations, interpolate_odometry
 from tagloc.mapping.odometry_factors import linearize_odometry, odometry_residuals
+from tagloc.mapping.odometry_noise import odometry_whitening, rotations_to_z
+from tagloc.mapping.whitening import AxisWhitening
 from tagloc.sim import ObservationConfig, World, load_default_world, simulate_drive
 from tagloc.sim.odometry import simulate_odometry
 from tagloc.sim.survey import odometry_noise_of, survey_from_drive
@@ -98,7 +99,12 @@ def test_odometry_jacobians_match_numerical_differences() -> None:
     M_odom = M_map_base @ SE3.exp(rng.normal(size=(4, 6)) * 0.05).as_matrix()
     step = inverse_h(M_odom[:-1]) @ M_odom[1:]
     c = rng.normal(size=N_CALIBRATION) * 0.02
-    sigmas = np.full((3, 6), 0.1)
+    # per-axis sigmas along rotated axes (a body that is not upright), as the builder whitens
+    ups = rng.normal(size=(3, 3))
+    sigmas = AxisWhitening(
+        np.full((3, 6), 0.1) * [1, 1, 0.5, 0.3, 0.3, 1],
+        rotations_to_z(ups / np.linalg.norm(ups, axis=1, keepdims=True)),
+    )
     e, A_prev, A_next, A_c = linearize_odometry(M_map_base, step, c, sigmas, calibrate=True)
     assert A_c is not None
     assert np.allclose(e, odometry_residuals(M_map_base, step, c, sigmas))
@@ -193,7 +199,7 @@ def test_odometry_noise_matches_the_simulated_random_walk() -> None:
         step_true = inverse_h(truth[key][:-1]) @ truth[key][1:]
         step_odom = inverse_h(odom[key][:-1]) @ odom[key][1:]
         errors.append(SE3.from_matrix(inverse_h(step_true) @ step_odom, normalize=True).log())
-        sigmas.append(odometry_sigmas(odom[key], odometry_noise_of(legged)))
+        sigmas.append(odometry_whitening(odom[key], odometry_noise_of(legged)).sigmas)
     z = np.concatenate(errors) / np.concatenate(sigmas)
     rms = np.sqrt(np.mean(z**2, axis=0))
     assert np.allclose(rms[[0, 1, 5]], 1.0, atol=0.1)  # x, y, yaw: the model's variance
