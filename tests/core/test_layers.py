@@ -81,3 +81,14 @@ def test_the_check_sees_a_violation(tmp_path: Path) -> None:
 @pytest.mark.parametrize("module", ["tagloc.cli.app", "tagloc"])
 def test_package_name(module: str) -> None:
     assert _package(module) == (None if module == "tagloc" else "cli")
+
+
+def test_the_simulator_is_a_source_only() -> None:
+    """``sim`` builds message streams; running the localizer on them is ``eval``'s."""
+    found = [
+        f"{path.relative_to(SRC)}:{line}: {module}"
+        for path in sorted((SRC / "sim").rglob("*.py"))
+        for line, module in _imports(path)
+        if _package(module) == "localize"
+    ]
+    assert found == []

@@ -1,6 +1,6 @@
 """Localization: the ``map -> odom`` fusion filter, its gates and its event log; the fiducial
-fix source (:class:`FiducialFixSource`) and the pipeline from a message stream to a
-:class:`LocalizationRun` (:class:`LocalizationPipeline`, :func:`localize`).
+fix source (:class:`FiducialFixSource`), the streaming node (:class:`LocalizerNode`) and its one
+driver (:func:`run`; :func:`record_run` into a :class:`LocalizationRun`).
 
 The filter (:class:`MapOdomFilter`) estimates the correction ``T_map_odom`` from absolute fixes
 (:class:`TagFix`: ``T_map_base`` at a stamp with a right-tangent covariance ``[x, y, z, rx, ry,
@@ -21,6 +21,7 @@ Policies
 """
 
 from tagloc.localize.config import LocalizerConfig, load_localizer_config, save_localizer_config
+from tagloc.localize.driver import Clock, RunResult, StreamInputError, record_run, run
 from tagloc.localize.events import EventKind, EventLog, FilterEvent
 from tagloc.localize.fiducial import FiducialConfig, FiducialFixSource, FrameFixes
 from tagloc.localize.filter import MapOdomFilter
@@ -41,17 +42,12 @@ from tagloc.localize.gating import (
     chi2_threshold,
 )
 from tagloc.localize.motion import ProcessNoise
-from tagloc.localize.pipeline import (
-    FrameTruth,
-    LocalizationPipeline,
-    PipelineInputError,
-    PipelineTopics,
-    localize,
-)
+from tagloc.localize.node import LocalizerNode
 from tagloc.localize.run import CameraFrameRecord, FixAttempt, LocalizationRun
 
 __all__ = [
     "CameraFrameRecord",
+    "Clock",
     "ConsistencyBuffer",
     "CorrectionCap",
     "CorrectionUpdate",
@@ -63,23 +59,23 @@ __all__ = [
     "FixAttempt",
     "FixQuality",
     "FrameFixes",
-    "FrameTruth",
-    "LocalizationPipeline",
     "LocalizationRun",
     "LocalizeError",
     "LocalizerConfig",
+    "LocalizerNode",
     "MapOdomFilter",
     "PartialFix",
-    "PipelineInputError",
-    "PipelineTopics",
     "PoseWithCovariance",
     "ProcessNoise",
     "QualityLimits",
+    "RunResult",
     "SourceMonitor",
+    "StreamInputError",
     "TagFix",
     "chi2_threshold",
     "load_localizer_config",
-    "localize",
     "planar_projection_jacobian",
+    "record_run",
+    "run",
     "save_localizer_config",
 ]

@@ -35,7 +35,6 @@ import logging
 import math
 from collections import Counter, OrderedDict, deque
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -55,9 +54,11 @@ from tagloc.localize.node_lidar import LIDAR, LidarScans, check_premap_overlap
 from tagloc.localize.outputs import Estimate, NodeOutput, OutputSink
 from tagloc.messages import (
     CameraInfoMsg,
+    FrameTruth,
     GroundTruthMsg,
     ImageMsg,
     Message,
+    NodeTopics,
     OdometryMsg,
     PointCloudMsg,
     TagDetectionsMsg,
@@ -72,35 +73,6 @@ logger = logging.getLogger(__name__)
 S_NS = 1_000_000_000
 _NAN6 = np.full((6, 6), np.nan)
 _NAN6.flags.writeable = False
-
-
-@dataclass(frozen=True, slots=True)
-class NodeTopics:
-    """Stream topic of each role (the simulator's and :class:`BagSink`'s defaults)."""
-
-    odom: str = "/odom"
-    detections: str = "/tag_detections"
-    image: str = "/camera/image"
-    camera_info: str = "/camera/camera_info"
-    truth: str = "/ground_truth"
-    tf: str = "/tf"
-    lidar: str = "/lidar/points"
-
-
-@dataclass(frozen=True, slots=True)
-class FrameTruth:
-    """Simulator truth of one camera frame, for the run record only (never for decisions).
-
-    Attributes
-    ----------
-    false_detection : tuple of bool
-        Per detection of the frame's ``TagDetectionsMsg``: injected (a glint) or real.
-    nearest_visible_m : float
-        Camera to the nearest tag truly in view, m (``inf``: none).
-    """
-
-    false_detection: tuple[bool, ...]
-    nearest_visible_m: float
 
 
 class LocalizerNode(CameraFrames, LidarScans):

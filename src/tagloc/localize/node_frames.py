@@ -36,7 +36,7 @@ if TYPE_CHECKING:
     from tagloc.localize.config_tags import FramesConfig
     from tagloc.localize.filter import MapOdomFilter
     from tagloc.localize.held import HeldRecords
-    from tagloc.localize.node import FrameTruth
+    from tagloc.messages import FrameTruth
     from tagloc.supervise import Supervisor
     from tagloc.tags import TagDetector, TagMap
 
