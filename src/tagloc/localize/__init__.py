@@ -43,6 +43,8 @@ from tagloc.localize.gating import (
 )
 from tagloc.localize.motion import ProcessNoise
 from tagloc.localize.node import LocalizerNode
+from tagloc.localize.registry import available_fix_sources, register_fix_source
+from tagloc.localize.sources import FixSource
 from tagloc.localize.run import CameraFrameRecord, FixAttempt, LocalizationRun
 
 __all__ = [
@@ -58,6 +60,7 @@ __all__ = [
     "FilterEvent",
     "FixAttempt",
     "FixQuality",
+    "FixSource",
     "FrameFixes",
     "LocalizationRun",
     "LocalizeError",
@@ -72,10 +75,12 @@ __all__ = [
     "SourceMonitor",
     "StreamInputError",
     "TagFix",
+    "available_fix_sources",
     "chi2_threshold",
     "load_localizer_config",
     "planar_projection_jacobian",
     "record_run",
+    "register_fix_source",
     "run",
     "save_localizer_config",
 ]

@@ -4,7 +4,8 @@ A batch decision of the filter (start-up, kidnap, re-acquisition after a gap) ma
 decision of fixes it buffered earlier, within the consistency (or kidnap) window. So the node
 holds each :class:`~tagloc.localize.run.FixAttempt` and :class:`~tagloc.localize.run.
 CameraFrameRecord` until its stamp is older than that window, relabels held fixes when a batch
-uses them, and then hands them on, in the order they were made. Memory: the records of the
+uses them (or when a buffered one is discarded), and then hands them on, in the order they were
+made: each fix's decision leaves once. Memory: the records of the
 last window only.
 """
 
@@ -62,6 +63,20 @@ class HeldRecords:
                 self._held[i] = dataclasses.replace(a, decision=kind.value)
                 done.append((fix, kind, owner))
         return done
+
+    def discard(self, stamp_ns: int, source: str) -> None:
+        """A fix held for consistency left the window unused: its held attempt (pending, of
+        ``source`` at ``stamp_ns``) gets that decision."""
+        pending, final = EventKind.PENDING_CONSISTENCY.value, EventKind.DISCARDED_CANDIDATE.value
+        for i, a in enumerate(self._held):
+            if (
+                isinstance(a, FixAttempt)
+                and a.stamp_ns == stamp_ns
+                and a.source == source
+                and a.decision == pending
+            ):
+                self._held[i] = dataclasses.replace(a, decision=final)
+                return
 
     def release(self, horizon_ns: int | None) -> None:
         """Hand on the records stamped before ``horizon_ns`` (all with None), in order; a frame

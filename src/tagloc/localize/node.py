@@ -405,6 +405,8 @@ class LocalizerNode:
 
     # ----- output ----------------------------------------------------------------------------
     def _on_event(self, event: FilterEvent) -> None:
+        if event.kind is EventKind.DISCARDED_CANDIDATE:
+            self._held.discard(event.stamp_ns, event.source)
         if event.kind not in FIX_DECISIONS:  # a fix's decision leaves once, in its FixAttempt
             self._emit(event)
 
