@@ -44,8 +44,8 @@ from tagloc.localize.gating import (
 from tagloc.localize.motion import ProcessNoise
 from tagloc.localize.node import LocalizerNode
 from tagloc.localize.registry import available_fix_sources, register_fix_source
-from tagloc.localize.sources import FixSource
 from tagloc.localize.run import CameraFrameRecord, FixAttempt, LocalizationRun
+from tagloc.localize.sources import FixSource
 
 __all__ = [
     "CameraFrameRecord",

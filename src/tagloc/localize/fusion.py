@@ -39,6 +39,7 @@ class Fusion:
         self._config, self._on_event = config, on_event
         self._statics: dict[tuple[str, str], SE3] = {}
         self._changes = 0
+        self._odom_cov: np.ndarray | None = None
         self._buffer, self._filter = self._build()
 
     @property
@@ -60,15 +61,22 @@ class Fusion:
         self._buffer.set_static(parent, child, T_parent_child)
         self._statics[parent, child] = T_parent_child
 
-    def add_process_noise(self, Q: np.ndarray) -> None:
-        """:meth:`MapOdomFilter.add_process_noise`."""
-        if self._filter.initialized:
-            self._filter.add_process_noise(Q)
+    def odometry_covariance(self, cov: np.ndarray) -> None:
+        """``process_noise.odometry_covariance: growth``: the positive part of the odometry
+        covariance's change since the previous message enters the filter's covariance
+        (:meth:`MapOdomFilter.add_process_noise`)."""
+        last, self._odom_cov = self._odom_cov, cov
+        if last is None or not np.isfinite(cov).all() or not self._filter.initialized:
+            return
+        w, V = np.linalg.eigh(0.5 * ((cov - last) + (cov - last).T))
+        if w.max() > 0:
+            self._filter.add_process_noise((V * np.clip(w, 0.0, None)) @ V.T)
             self._changes += 1
 
     def reset(self) -> None:
         """A new buffer (with the static transforms) and a new filter."""
         self._buffer, self._filter = self._build()
+        self._odom_cov = None
         self._changes += 1
 
     def _build(self) -> tuple[TransformBuffer, MapOdomFilter]:

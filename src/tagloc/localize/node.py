@@ -47,13 +47,13 @@ import numpy as np
 from tagloc.camera import CameraModel
 from tagloc.geometry import SE3
 from tagloc.localize.config import LocalizerConfig
+from tagloc.localize.decisions import FixDecisions
 from tagloc.localize.estimate_output import EstimateOutput
-from tagloc.localize.events import APPLIED, FIX_DECISIONS, EventKind, FilterEvent
+from tagloc.localize.events import FIX_DECISIONS, EventKind, FilterEvent
 from tagloc.localize.fiducial import FrameFixes
 from tagloc.localize.filter import MapOdomFilter
-from tagloc.localize.fix import LocalizeError, TagFix
+from tagloc.localize.fix import LocalizeError
 from tagloc.localize.fusion import Fusion
-from tagloc.localize.held import HeldRecords
 from tagloc.localize.motion import CALIBRATION_PARAMETERS
 from tagloc.localize.outputs import NodeOutput, OutputSink
 from tagloc.localize.registry import build_fix_sources
@@ -126,10 +126,7 @@ class LocalizerNode:
         )
         self._queue = WorkQueue()
         self._skipped = SkipCounter()
-        # fix attempts and frame records wait here until no batch decision can revise them
-        self._held = HeldRecords(self._emit)
-        windows = (cfg.gates.consistency_window_s, cfg.kidnap.window_s)
-        self._held_ns = round((max(windows) + 1.0) * S_NS)
+        self._decisions = FixDecisions(cfg, self.supervisor, self._emit)
         self._estimates = EstimateOutput(cfg)
         self._jump_ns = round(cfg.supervisor.clock_jump_s * S_NS)
         self._odom_cov_growth = cfg.process_noise.odometry_covariance == "growth"
@@ -141,9 +138,6 @@ class LocalizerNode:
         """The timeline's own state (at construction and after a clock jump)."""
         self._last_odom: int | None = None
         self._last_T: SE3 | None = None
-        self._odom_cov: np.ndarray | None = None
-        self._fix_ns: int | None = None  # last accepted fix
-        self._fix_odometer_m = self._odometer_m
         self._tick_ns = -(2**62)
         #: The correction published at the latest odometry sample (None uninitialized): read by
         #: worker threads (an attribute assignment is atomic).
@@ -244,7 +238,7 @@ class LocalizerNode:
             If the stream held no usable odometry.
         """
         self._run_due(None)
-        self._held.release(None)
+        self._decisions.release_all()
         if self._last_odom is None:
             f = self._config.frames
             raise LocalizeError(
@@ -274,7 +268,7 @@ class LocalizerNode:
         fusion.buffer.set_transform(f.odom_frame, f.base_frame, stamp, T)
         self.supervisor.on_input("odometry", stamp)
         if cov is not None and self._odom_cov_growth:
-            self._add_odometry_noise(cov)
+            fusion.odometry_covariance(cov)
         first = self._config.output.publish_first
         if first:
             self._estimate(stamp, T)
@@ -282,16 +276,6 @@ class LocalizerNode:
         if not first:
             self._estimate(stamp, T)
         return None
-
-    def _add_odometry_noise(self, cov: np.ndarray) -> None:
-        """``process_noise.odometry_covariance: growth``: the positive part of the odometry
-        covariance's change since the previous message enters the filter's covariance."""
-        last, self._odom_cov = self._odom_cov, cov
-        if last is None or not np.isfinite(cov).all():
-            return
-        w, V = np.linalg.eigh(0.5 * ((cov - last) + (cov - last).T))
-        if w.max() > 0:
-            self._fusion.add_process_noise((V * np.clip(w, 0.0, None)) @ V.T)
 
     def _estimate(self, stamp: int, T_odom_base: SE3) -> None:
         """Predict to the sample, publish its estimate, step the supervisor."""
@@ -323,42 +307,12 @@ class LocalizerNode:
             result = source.fixes(work.payload, self._context())
             if result is None:
                 continue
-            # 1. refusals, then each offer decided by the filter (a batch may relabel held ones)
-            for attempt in result.refused:
-                self._held.hold(attempt)
-            for _ in range(result.failed):
-                self.supervisor.on_fix(source.spec.name, False, math.nan, math.nan)
-            flt = self._fusion.filter
-            for offer in result.offers:
-                fix = offer.fix
-                event = flt.update(fix) if isinstance(fix, TagFix) else flt.update_partial(fix)
-                attempt = dataclasses.replace(offer.attempt, decision=event.kind.value,
-                                              d2=event.d2)  # fmt: skip
-                self._held.hold(attempt, fix, index)
-                if event.kind is not EventKind.PENDING_CONSISTENCY:
-                    self._judged(source, event, offer.dof, offer.reproj_px)
-                for old, kind, owner in self._held.relabel(flt.last_batch):
-                    batch_event = FilterEvent(old.stamp_ns, kind)
-                    self._judged(self._sources[owner], batch_event, flt.dof,
-                                 old.quality.reproj_err_px)  # fmt: skip
-            # 2. the frame's record; records older than the hold window are final
-            if result.frame is not None:
-                self._held.hold(result.frame)
-            if result.release_ns is not None:
-                self._held.release(result.release_ns - self._held_ns)
+            self._decisions.apply(
+                self._sources, index, result, self._fusion.filter, self._odometer_m
+            )
             for other in self._sources:
                 if other is not source:
                     other.observe(result)
-
-    def _judged(self, source: FixSource, event: FilterEvent, dof: int, reproj_px: float) -> None:
-        """A final decision on a fix: the supervisor's quality books (NIS per measured
-        direction) and, for an accepted fix of every direction, the last accepted fix."""
-        accepted = event.kind.value in APPLIED
-        if accepted and dof >= self._fusion.filter.dof:
-            self._fix_ns = max(self._fix_ns or event.stamp_ns, event.stamp_ns)
-            self._fix_odometer_m = self._odometer_m
-        nis = math.nan if event.d2 is None or dof == 0 else event.d2 / dof
-        self.supervisor.on_fix(source.spec.name, accepted, nis, reproj_px)
 
     # ----- supervisor, clock jumps -----------------------------------------------------------
     def _tick(self, stamp: int, reason: str = "") -> None:
@@ -369,8 +323,7 @@ class LocalizerNode:
             return
         self._tick_ns = stamp
         flt = self._fusion.filter
-        since_s = math.inf if self._fix_ns is None else (stamp - self._fix_ns) / S_NS
-        since_m = math.inf if self._fix_ns is None else self._odometer_m - self._fix_odometer_m
+        since_s, since_m = self._decisions.since_last_fix(stamp, self._odometer_m)
         state = EstimatorState(flt.initialized, flt.reacquiring, since_s, since_m)
         move = self.supervisor.step(stamp, state, reason)
         if move is not None:
@@ -396,7 +349,7 @@ class LocalizerNode:
             if dropped[index]:
                 self._skipped[source.jump_reason] += dropped[index]
             source.reset()
-        self._held.release(None)
+        self._decisions.reset()
         self._fusion.reset()
         self._estimates.reset()
         self._start_over()
@@ -406,7 +359,7 @@ class LocalizerNode:
     # ----- output ----------------------------------------------------------------------------
     def _on_event(self, event: FilterEvent) -> None:
         if event.kind is EventKind.DISCARDED_CANDIDATE:
-            self._held.discard(event.stamp_ns, event.source)
+            self._decisions.discarded(event.stamp_ns, event.source)
         if event.kind not in FIX_DECISIONS:  # a fix's decision leaves once, in its FixAttempt
             self._emit(event)
 

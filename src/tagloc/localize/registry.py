@@ -21,6 +21,7 @@ __all__ = [
     "available_fix_sources",
     "build_fix_sources",
     "register_fix_source",
+    "unregister_fix_source",
 ]
 
 #: ``factory(config, inputs) -> FixSource | None``.
@@ -51,6 +52,18 @@ def register_fix_source(name: str, factory: FixSourceFactory, *, replace: bool =
     if name in _REGISTRY and not replace:
         raise LocalizeError(f"fix source {name!r} is already registered")
     _REGISTRY[name] = factory
+
+
+def unregister_fix_source(name: str) -> None:
+    """Remove a fix source from the registry (nodes built later do without it).
+
+    Raises
+    ------
+    LocalizeError
+        If ``name`` is not registered.
+    """
+    if _REGISTRY.pop(name, None) is None:
+        raise LocalizeError(f"fix source {name!r} is not registered")
 
 
 def available_fix_sources() -> tuple[str, ...]:

@@ -242,7 +242,8 @@ class LidarSource:
         return {"lidar_source": {"sweeps_thinned": self._thinned}}
 
     # ----- internals -------------------------------------------------------------------------
-    def _skip(self, reason: str, detail: str, *, expected: bool = False) -> None:
+    def _skip(self, reason: str, detail: str, *, expected: bool = False) -> SourceResult | None:
+        """A counted skip: nothing came of the sweep."""
         self.skipped.skip(reason, detail, expected=expected)
         return None
 
