@@ -1,5 +1,6 @@
 """Evaluation: trajectory error metrics (ATE, RPE via evo), the reliability protocol, the naive
-baseline beside the filter, drift summaries, plots and the HTML / ``summary.json`` report."""
+baseline beside the filter, drift summaries, plots and the HTML / ``summary.json`` report; the
+localizer run on simulated scenarios (:mod:`tagloc.eval.scenarios`)."""
 
 from tagloc.eval.metrics import TrajectoryError, absolute_trajectory_error, endpoint_drift
 from tagloc.eval.protocol import EvalConfig, KidnapRecovery, Reliability
