@@ -41,6 +41,7 @@ if TYPE_CHECKING:
     from tagloc.localize.driver import NodeFactory
     from tagloc.localize.node import LocalizerNode
     from tagloc.messages import Message
+    from tagloc.tags import TagMap
 
 logger = logging.getLogger(__name__)
 #: Files ``tagloc localize`` writes into ``--out``.
@@ -218,6 +219,14 @@ def _read_premap(path: Path) -> np.ndarray:
     return read_ply(path) if suffix == ".ply" else read_pcd(path)
 
 
+def _check_premap(premap: np.ndarray | None, tag_map: TagMap, config: LocalizerConfig) -> None:
+    """Refuse a premap the node cannot use before anything is written (one-line error)."""
+    if premap is not None and config.lidar.enabled:
+        from tagloc.localize.source_lidar import check_premap
+
+        check_premap(premap, tag_map, config.frames.map_frame)
+
+
 def _scenario_node(
     name: str, seed: int, duration: float | None, cfg: LocalizerConfig | None,
     premap: np.ndarray | None = None, *, live: bool = False,
@@ -234,6 +243,7 @@ def _scenario_node(
     config = live_order(config, live)
     if premap is None and config.lidar.enabled and scenario.world.robot.lidar is not None:
         premap = scenario_premap(scenario)
+    _check_premap(premap, scenario.tag_map, config)
     node = partial(
         LocalizerNode, scenario.tag_map, config, frame_truth=source.frame_truth, premap=premap
     )
@@ -278,6 +288,7 @@ def _bag_node(
     wanted += [t for t in source.bag_topics if t.rstrip("/").endswith("tf_static")]
     source = BagSource(bag, sorted(set(wanted)), corner_order=cam.corner_order,
                        default_family=family)  # fmt: skip
+    _check_premap(premap, tag_map, config)
     node = partial(LocalizerNode, tag_map, config, camera=camera, T_base_cam=T_base_cam,
                    topics=roles, premap=premap)  # fmt: skip
     return WiredNode(config, node, source, bag.name, checked)

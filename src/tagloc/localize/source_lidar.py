@@ -51,7 +51,14 @@ from tagloc.messages import Message, PointCloudMsg
 from tagloc.supervise import FixSourceSpec
 from tagloc.tags import TagDetection, TagMap
 
-__all__ = ["LIDAR", "CabRule", "LidarSource", "check_premap_overlap", "prepare_premap"]
+__all__ = [
+    "LIDAR",
+    "CabRule",
+    "LidarSource",
+    "check_premap",
+    "check_premap_overlap",
+    "prepare_premap",
+]
 
 LIDAR = "lidar"
 S_NS = 1_000_000_000
@@ -89,8 +96,8 @@ def check_premap_overlap(premap_map: np.ndarray, tag_map: TagMap, map_frame: str
         )
 
 
-def prepare_premap(premap: np.ndarray, tag_map: TagMap, config: LocalizerConfig) -> Target:
-    """The premap as a registration target, once checked.
+def check_premap(premap: np.ndarray, tag_map: TagMap, map_frame: str) -> np.ndarray:
+    """The premap as ``(N, 3)`` float64 points, if the node can use it.
 
     Raises
     ------
@@ -103,7 +110,19 @@ def prepare_premap(premap: np.ndarray, tag_map: TagMap, config: LocalizerConfig)
         raise LocalizeError(f"premap must be (N >= 10, 3) points, got {points.shape}")
     if not np.isfinite(points).all():
         raise LocalizeError("premap holds NaN or inf points")
-    check_premap_overlap(points, tag_map, config.frames.map_frame)
+    check_premap_overlap(points, tag_map, map_frame)
+    return points
+
+
+def prepare_premap(premap: np.ndarray, tag_map: TagMap, config: LocalizerConfig) -> Target:
+    """The premap as a registration target, once checked (:func:`check_premap`).
+
+    Raises
+    ------
+    LocalizeError
+        As :func:`check_premap`.
+    """
+    points = check_premap(premap, tag_map, config.frames.map_frame)
     return Target.from_points(points, config.lidar.fix.registration)
 
 
