@@ -1,13 +1,14 @@
-"""End-to-end cost of the localization pipeline on the demo drive, beside the filter's own share.
+"""End-to-end cost of the localization node on the demo drive, beside the filter's own share.
 
 Run: ``.venv/bin/python benchmarks/bench_localize.py [--seconds 120] [--images 90]``
 
 1. Detection excluded: the default scenario's first ``--seconds`` s (pre-detected corners from
-   ``simulate_observations``) replayed through :class:`LocalizationPipeline`; every call of the
-   filter's ``predict`` and ``update`` is timed on its own. Replay speed = simulated seconds per
-   wall second of the pipeline (the corner simulation is timed separately).
+   ``simulate_observations``) through the node on the driver's replay clock
+   (:func:`tagloc.localize.driver.run`); every call of the filter's ``predict`` and ``update`` is
+   timed on its own. Replay speed = simulated seconds per wall second of the run (the corner
+   simulation is timed separately).
 2. Detection included: ``--images`` frames rendered with ``render_frames`` (a 3 s stretch with
-   tags in view), fed as ``ImageMsg`` through the same pipeline (AprilTag 3 detector); the
+   tags in view), fed as ``ImageMsg`` through the same node (AprilTag 3 detector); the
    replay speed at 30 Hz is estimated from the per-frame cost plus the odometry rows' cost.
 3. CPU share of the filter: everything it does per simulated second of this drive (``predict``
    per 100 Hz odometry row, ``update`` per fix, ``T_map_base_at`` per frame for the fix source's
@@ -20,15 +21,20 @@ from __future__ import annotations
 import argparse
 import statistics
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
+from functools import partial
 from typing import Any
 
 import numpy as np
 
-from tagloc.localize.pipeline import LocalizationPipeline
+from tagloc.eval.scenarios import calibrated_config, scenario_config
+from tagloc.localize.driver import run
+from tagloc.localize.node import LocalizerNode
+from tagloc.localize.outputs import OutputSink, RunRecorder
 from tagloc.messages import ImageMsg, Message, OdometryMsg
 from tagloc.sim import render_frames
-from tagloc.sim.scenarios import ScenarioSource, build_scenario, calibrated_config, scenario_config
+from tagloc.sim.scenarios import ScenarioSource, build_scenario
+from tagloc.tags import make_detector
 
 S = 1_000_000_000
 
@@ -47,12 +53,19 @@ def _wrap(obj: Any, name: str, out: list[int]) -> None:
     setattr(obj, name, timed)
 
 
-def _pipeline(source: ScenarioSource) -> LocalizationPipeline:
+def _node(
+    source: ScenarioSource, timings: dict[str, list[int]], sinks: Sequence[OutputSink]
+) -> LocalizerNode:
+    """The scenario's node with its sinks, each method named in ``timings`` of its filter (or,
+    for ``detect``, of its detector) timed into the list."""
     scenario = source.scenario
-    return LocalizationPipeline(
-        scenario.tag_map, calibrated_config(scenario, scenario_config()),
-        frame_truth=source.frame_truth,
-    )  # fmt: skip
+    config = calibrated_config(scenario, scenario_config())
+    detector = make_detector(config.tags.backend, config.tags.family)
+    node = LocalizerNode(scenario.tag_map, config, sinks, frame_truth=source.frame_truth,
+                         detector=detector)  # fmt: skip
+    for name, out in timings.items():
+        _wrap(detector if name == "detect" else node.filter, name, out)
+    return node
 
 
 def _us(samples: list[int]) -> tuple[float, float, float]:
@@ -68,20 +81,19 @@ def corners_replay(seconds: float) -> dict[str, Any]:
     scenario = build_scenario("default", seed=0, duration_s=seconds)
     source = ScenarioSource(scenario)  # simulates the corners of every frame
     t_sim = time.perf_counter() - t0
-    pipe = _pipeline(source)
     predict: list[int] = []
     update: list[int] = []
     prior: list[int] = []
-    _wrap(pipe.filter, "predict", predict)
-    _wrap(pipe.filter, "update", update)
-    _wrap(pipe.filter, "T_map_base_at", prior)
+    timings = {"predict": predict, "update": update, "T_map_base_at": prior}
+    recorder = RunRecorder()
     t0 = time.perf_counter()
-    run = pipe.run(source)
+    run(partial(_node, source, timings), source, [recorder])
     t_run = time.perf_counter() - t0
-    sim_s = (run.stamps_ns[-1] - run.stamps_ns[0]) / S
+    run_ = recorder.run({})
+    sim_s = (run_.stamps_ns[-1] - run_.stamps_ns[0]) / S
     return {
         "sim_s": sim_s, "t_sim": t_sim, "t_run": t_run, "predict": predict, "update": update,
-        "prior": prior, "rows": len(run.stamps_ns), "frames": len(run.frames),
+        "prior": prior, "rows": len(run_.stamps_ns), "frames": len(run_.frames),
     }  # fmt: skip
 
 
@@ -104,7 +116,7 @@ def _image_stream(source: ScenarioSource, frames: list[Any]) -> Iterator[tuple[s
 
 
 def images_replay(n_images: int) -> dict[str, Any]:
-    """Part 2: rendered images through the detector, the same pipeline."""
+    """Part 2: rendered images through the detector, the same node."""
     scenario = build_scenario("default", seed=0, duration_s=60.0)
     source = ScenarioSource(scenario)
     cams = scenario.camera_stamps_ns
@@ -113,19 +125,17 @@ def images_replay(n_images: int) -> dict[str, Any]:
     t0 = time.perf_counter()
     frames = list(render_frames(scenario.drive, stamps_ns=stamps))
     t_render = time.perf_counter() - t0
-    pipe = _pipeline(source)
     detect: list[int] = []
-    t0 = time.perf_counter()
     stream = list(_image_stream(source, frames))
-    pipe._detect(ImageMsg(stamps[0], "camera_optical", frames[0].image, "mono8"))  # warm up
-    _wrap(pipe, "_detect", detect)
+    make_detector("apriltag", "tag36h11").detect(frames[0].image)  # warm up
+    recorder = RunRecorder()
     t0 = time.perf_counter()
-    run = pipe.run(stream)
+    run(partial(_node, source, {"detect": detect}), stream, [recorder])
     t_run = time.perf_counter() - t0
     n_odom = sum(isinstance(m, OdometryMsg) for _, m in stream)
     return {
         "t_render": t_render, "t_run": t_run, "detect": detect, "n_odom": n_odom,
-        "n_images": len(frames), "accepted": sum(a.accepted for a in run.fixes),
+        "n_images": len(frames), "accepted": sum(a.accepted for a in recorder.fixes),
     }  # fmt: skip
 
 
@@ -139,7 +149,7 @@ def main() -> None:
     p_med, p_90, p_mean = _us(c["predict"])
     u_med, u_90, u_mean = _us(c["update"])
     d_med, d_90, d_mean = _us(im["detect"])
-    # per simulated second at 30 Hz with detection: images' pipeline time scaled to 30 frames
+    # per simulated second at 30 Hz with detection: images' node time scaled to 30 frames
     # plus 100 Hz odometry rows (the corner replay's time per row, frames excluded)
     per_frame_s = im["t_run"] / max(im["n_images"], 1)
     row_s = (c["t_run"] - sum(c["update"]) / 1e9) / max(c["rows"], 1)
@@ -166,7 +176,7 @@ def main() -> None:
     print("-" * 92)
     rows = [
         ("corner simulation (simulate_observations), x real time", c["sim_s"] / c["t_sim"]),
-        ("replay, detection excluded (pipeline), x real time", c["sim_s"] / c["t_run"]),
+        ("replay, detection excluded (node), x real time", c["sim_s"] / c["t_run"]),
         ("replay, detection included (30 Hz images), x real time", speed_images),
         (f"filter CPU share, this drive ({fixes_per_s:.0f} fixes/s), % of a core", 100 * share),
         ("filter CPU share, 200 Hz odometry + 30 fixes/s, % of a core", 100 * share_200),

@@ -5,8 +5,8 @@ seeded) with the odometry at ``--odom-hz`` (default 200 Hz) and the robot camera
 1280x720 images rendered by the simulator (:func:`tagloc.sim.render_frames`, default effects),
 all rendered before the run and held in memory; ground truth passes through.
 
-:func:`tagloc.localize.realtime.run_realtime` feeds it to a :class:`LocalizerNode` at speed
-1.0 (the wall clock paces it), with AprilTag detection (default backend, ``nthreads=1``) on a
+The driver's wall clock (:func:`tagloc.localize.driver.run`, ``clock="wall"``) feeds it to a
+:class:`LocalizerNode` at speed 1.0, with AprilTag detection (default backend, ``nthreads=1``) on a
 worker thread behind a drop-oldest queue of ``--queue`` frames, once with the worker at a
 lower priority (``worker_nice=10``, the default) and once at the main thread's. Reported
 (definitions in :class:`tagloc.localize.realtime_stats.RealtimeStats`):
@@ -21,7 +21,7 @@ lower priority (``worker_nice=10``, the default) and once at the main thread's. 
 
 Reference, in the same run on the same images: the bare detector's time per frame
 (``detector.detect(image)`` of every frame once, nothing else running), and the fused ATE of
-the offline pipeline (every frame detected inline, nothing dropped) beside the real-time one.
+the replay clock's run (every frame detected inline, nothing dropped) beside the real-time one.
 One core: the process is pinned to one CPU, ``cv2.setNumThreads(1)``.
 
 Run: ``.venv/bin/python benchmarks/bench_realtime.py [--seconds 20] [--queue 2]``
@@ -33,15 +33,16 @@ import argparse
 import os
 import time
 from collections.abc import Iterator
+from functools import partial
 
 import cv2
 import numpy as np
 
 from bench_detect import pin_one_core  # the same pinning as the detector benchmark
+from tagloc.eval.scenarios import calibrated_config, scenario_config
+from tagloc.localize.driver import record_run, run
 from tagloc.localize.node import LocalizerNode
 from tagloc.localize.outputs import RunRecorder
-from tagloc.localize.pipeline import LocalizationPipeline
-from tagloc.localize.realtime import run_realtime
 from tagloc.localize.run import LocalizationRun
 from tagloc.messages import (
     CameraInfoMsg,
@@ -60,8 +61,6 @@ from tagloc.sim.scenarios import (
     TF_STATIC,
     Scenario,
     build_scenario,
-    calibrated_config,
-    scenario_config,
 )
 from tagloc.tags import make_detector
 
@@ -131,9 +130,9 @@ def main() -> None:
     scenario, images = build(args.seconds, args.odom_hz)
     render_s = time.perf_counter() - start
     config = calibrated_config(scenario, scenario_config())
-    # reference: the bare detector, then the offline pipeline (every frame detected inline)
+    # reference: the bare detector, then the replay clock (every frame detected inline)
     det_p50, det_p99 = detector_ms(images)
-    offline = LocalizationPipeline(scenario.tag_map, config).run(stream(scenario, images))
+    offline = record_run(partial(LocalizerNode, scenario.tag_map, config), stream(scenario, images))
     # the real-time runs, the worker at a lower priority: the live order (each odometry sample
     # published before the frames it completes, as --realtime runs), then the replay order
     runs = []
@@ -142,20 +141,21 @@ def main() -> None:
         output = config.output.model_copy(update={"publish_first": first})
         live = config.model_copy(update={"output": output})
         recorder = RunRecorder()
-        node = LocalizerNode(scenario.tag_map, live, [recorder])
         detector = make_detector(config.tags.backend, config.tags.family)
-        stats = run_realtime(
-            node, stream(scenario, images), speed=args.speed, queue_size=args.queue,
-            detector=detector, worker_nice=nice,
+        result = run(
+            partial(LocalizerNode, scenario.tag_map, live), stream(scenario, images), [recorder],
+            clock="wall", speed=args.speed, queue_size=args.queue, detector=detector,
+            worker_nice=nice,
         )  # fmt: skip
-        runs.append((stats, recorder.run(node.metadata())))
+        assert result.realtime is not None
+        runs.append((result.realtime, recorder.run(result.node.metadata())))
     load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
     n_odom = len(scenario.drive.stamps_ns)
     print(f"default drive, first {args.seconds:g} s: {len(images)} images 1280x720 at 30 Hz "
           f"(rendered in {render_s:.0f} s), {n_odom} odometry samples at {args.odom_hz:g} Hz; "
           f"AprilTag tag36h11 nthreads=1, cv2.setNumThreads(1), {pinned}; "
           f"load average {load}")  # fmt: skip
-    print(f"run_realtime(speed={args.speed:g}, queue_size={args.queue}, worker_nice=10), "
+    print(f"run(clock='wall', speed={args.speed:g}, queue_size={args.queue}, worker_nice=10), "
           "publish_first True | False: "
           f"{runs[0][0].wall_s:.1f} | {runs[1][0].wall_s:.1f} s wall for "
           f"{runs[0][0].stream_s:.1f} s of stream")  # fmt: skip

@@ -21,20 +21,14 @@ import tracemalloc
 
 import numpy as np
 
+from tagloc.eval.scenarios import calibrated_config, scenario_config
 from tagloc.localize.node import LocalizerNode
 from tagloc.localize.outputs import NodeOutput
 from tagloc.messages import OdometryMsg, TagDetectionsMsg
 from tagloc.sim import load_default_world
 from tagloc.sim.drive import simulate_drive
 from tagloc.sim.observations import ObservationConfig
-from tagloc.sim.scenarios import (
-    Scenario,
-    ScenarioSource,
-    calibrated_config,
-    scenario_config,
-    tag_map_from_world,
-    truncate_drive,
-)
+from tagloc.sim.scenarios import Scenario, ScenarioSource, tag_map_from_world, truncate_drive
 
 S = 1_000_000_000
 

@@ -38,11 +38,13 @@ __all__ = [
     "IMAGE_ENCODINGS",
     "MESSAGE_TYPES",
     "CameraInfoMsg",
+    "FrameTruth",
     "GroundTruthMsg",
     "ImageMsg",
     "Message",
     "MessageSink",
     "MessageSource",
+    "NodeTopics",
     "OdometryMsg",
     "PointCloudMsg",
     "PoseWithCovarianceMsg",
@@ -329,6 +331,36 @@ Message: TypeAlias = (
     | PoseWithCovarianceMsg | GroundTruthMsg | PointCloudMsg
 )  # fmt: skip
 MESSAGE_TYPES: tuple[type[Message], ...] = get_args(Message)
+
+
+@dataclass(frozen=True, slots=True)
+class NodeTopics:
+    """Stream topic of each role the localizer reads (the simulator's and
+    :class:`~tagloc.io.BagSink`'s defaults)."""
+
+    odom: str = "/odom"
+    detections: str = "/tag_detections"
+    image: str = "/camera/image"
+    camera_info: str = "/camera/camera_info"
+    truth: str = "/ground_truth"
+    tf: str = "/tf"
+    lidar: str = "/lidar/points"
+
+
+@dataclass(frozen=True, slots=True)
+class FrameTruth:
+    """Simulator truth of one camera frame, for the run record only (never for decisions).
+
+    Attributes
+    ----------
+    false_detection : tuple of bool
+        Per detection of the frame's ``TagDetectionsMsg``: injected (a glint) or real.
+    nearest_visible_m : float
+        Camera to the nearest tag truly in view, m (``inf``: none).
+    """
+
+    false_detection: tuple[bool, ...]
+    nearest_visible_m: float
 
 
 class MessageSource(Protocol):

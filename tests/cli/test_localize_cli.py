@@ -38,8 +38,11 @@ def test_scenario_writes_tum_events_and_a_bag(tmp_path: Path) -> None:
     err = np.linalg.norm(np.asarray(T_fused.translation) - T_truth.translation, axis=1)
     assert len(stamps) == 1501 and np.sqrt(np.mean(err**2)) < 0.1
     events = [json.loads(line) for line in (out / "events.jsonl").read_text().splitlines()]
-    assert events[0]["kind"] == "pending_consistency"
     assert any(e["kind"] == "initialized" for e in events)
+    # a fix's decision is written once, final, in fixes.jsonl (not also as an event)
+    assert not {e["kind"] for e in events} & {"pending_consistency", "accepted", "gated_chi2"}
+    fixes = [json.loads(line) for line in (out / "fixes.jsonl").read_text().splitlines()]
+    assert fixes[0]["decision"] == "initialized"  # held as pending, written once decided
     bag = BagSource(out / "localization.mcap")
     assert set(bag.topics) == {"/tf", "/localization/pose"}
     assert "ATE RMSE" in result.stdout

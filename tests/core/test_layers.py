@@ -154,7 +154,6 @@ def test_package_name(module: str) -> None:
     assert _package(module) == (None if module == "tagloc" else "cli")
 
 
-@pytest.mark.xfail(strict=True, reason="the node's mixins; being replaced")
 def test_no_import_cycle_through_the_node() -> None:
     assert [c for c in import_cycles(import_graph(SRC)) if _in_node(c)] == []
 
@@ -178,3 +177,14 @@ def test_the_cycle_check_sees_a_cycle(tmp_path: Path) -> None:
     graph = import_graph(tmp_path)
     assert graph["tagloc.geometry.c"] == {"tagloc.geometry"}
     assert import_cycles(graph) == [["tagloc.geometry.a", "tagloc.geometry.b"]]
+
+
+def test_the_simulator_is_a_source_only() -> None:
+    """``sim`` builds message streams; running the localizer on them is ``eval``'s."""
+    found = [
+        f"{path.relative_to(SRC)}:{line}: {module}"
+        for path in sorted((SRC / "sim").rglob("*.py"))
+        for line, module in _imports(path)
+        if _package(module) == "localize"
+    ]
+    assert found == []

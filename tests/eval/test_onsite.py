@@ -27,12 +27,8 @@ S_NS = 1_000_000_000
 
 
 def _held_out(duration_s: float, n_tags: int):  # type: ignore[no-untyped-def]
-    from tagloc.sim.scenarios import (
-        ScenarioSource,
-        build_scenario,
-        calibrated_config,
-        scenario_config,
-    )
+    from tagloc.eval.scenarios import calibrated_config, scenario_config
+    from tagloc.sim.scenarios import ScenarioSource, build_scenario
 
     scenario = build_scenario("default", 0, duration_s)
     messages = list(ScenarioSource(scenario))

@@ -156,14 +156,17 @@ def _wheel_scenario(duration_s: float):  # type: ignore[no-untyped-def]
 def test_simulated_misset_mounting_is_estimated() -> None:
     """The simulator's drive (wheel odometry: no sideways drift, which a camera's yaw cannot be
     told apart from), the node given a mounting 1 deg / 3 cm off."""
-    from tagloc.localize.pipeline import LocalizationPipeline
-    from tagloc.sim.scenarios import ScenarioSource, calibrated_config, scenario_config
+    from functools import partial
+
+    from tagloc.eval.scenarios import calibrated_config, scenario_config
+    from tagloc.localize import LocalizerNode, record_run
+    from tagloc.sim.scenarios import ScenarioSource
 
     scenario = _wheel_scenario(240.0)
     source = ScenarioSource(scenario)
     used = source.T_base_cam @ SE3.exp(MISSET)
     config = calibrated_config(scenario, scenario_config())
-    run = LocalizationPipeline(scenario.tag_map, config, T_base_cam=used).run(source)
+    run = record_run(partial(LocalizerNode, scenario.tag_map, config, T_base_cam=used), source)
     check = check_run_extrinsics(run, used)
     assert check is not None and check.warning is not None
     rot_deg, trans_m = _error(check.T_base_cam_estimate, source.T_base_cam)

@@ -12,22 +12,25 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass, replace
+from functools import partial
 
 import numpy as np
 import pytest
 
+from tagloc.eval.scenarios import calibrated_config, localize_scenario, scenario_config
+from tagloc.localize import LocalizerNode, driver
+from tagloc.localize.driver import NodeFactory
 from tagloc.localize.outputs import RunRecorder
-from tagloc.localize.pipeline import LocalizationPipeline
 from tagloc.localize.run import LocalizationRun
-from tagloc.messages import ImageMsg, Message, OdometryMsg, PointCloudMsg, TagDetectionsMsg
-from tagloc.sim.scenarios import (
-    SCENARIOS,
-    ScenarioSource,
-    build_scenario,
-    calibrated_config,
-    localize_scenario,
-    scenario_config,
+from tagloc.messages import (
+    ImageMsg,
+    Message,
+    NodeTopics,
+    OdometryMsg,
+    PointCloudMsg,
+    TagDetectionsMsg,
 )
+from tagloc.sim.scenarios import SCENARIOS, ScenarioSource, build_scenario
 from tagloc.supervise import LadderTransition, Level
 from tagloc.tags import TagDetection
 
@@ -289,20 +292,23 @@ def test_a_detector_that_raises_is_counted_and_the_node_goes_on() -> None:
     config = calibrated_config(scenario, scenario_config())
     detector = RaisingDetector(detections)
 
-    def pipeline(detector: RaisingDetector | None = None) -> LocalizationPipeline:
-        return LocalizationPipeline(
-            scenario.tag_map, config, frame_truth=source.frame_truth, detector=detector
-        )
+    def node(detector: RaisingDetector | None = None) -> NodeFactory:
+        return partial(
+            LocalizerNode, scenario.tag_map, config, frame_truth=source.frame_truth,
+            detector=detector,
+        )  # fmt: skip
 
-    images = pipeline(detector)
     size = (source.camera.width, source.camera.height)
-    run = images.run(_as_images(stream, images.topics.image, size=size))
+    recorder = RunRecorder()
+    images = driver.run(node(detector), _as_images(stream, NodeTopics().image, size=size),
+                        [recorder])  # fmt: skip
+    run = recorder.run(images.node.metadata())
     assert detector.calls == len(detections) == 901
     assert len(detector.raised) == len(detections) // 3
     assert run.metadata["skipped"] == {"detector_error": len(detector.raised)}
     assert len(run.frames) == len(detections) - len(detector.raised)
     # the same run as one in which those frames never came
-    dropped = pipeline().run(_as_images(stream, "", drop=set(detector.raised)))
+    dropped = driver.record_run(node(), _as_images(stream, "", drop=set(detector.raised)))
     np.testing.assert_array_equal(run.stamps_ns, dropped.stamps_ns)
     dt = np.asarray(run.T_map_odom.translation) - dropped.T_map_odom.translation
     assert np.abs(dt).max() <= 1e-12

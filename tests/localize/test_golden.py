@@ -12,8 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tagloc.eval.scenarios import run_scenario
 from tagloc.geometry import SE3
-from tagloc.sim.scenarios import SCENARIOS, run_scenario
+from tagloc.sim.scenarios import SCENARIOS
 
 GOLDEN = Path(__file__).parent / "golden"
 DEFAULT = ("default", "kidnap", "moved_tag")  # the rest under --runslow (about 20 s each)

@@ -18,13 +18,14 @@ import numpy as np
 import pytest
 
 from tagloc.errors import ConfigError
+from tagloc.eval.scenarios import calibrated_config, scenario_config
 from tagloc.geometry import SE3
 from tagloc.localize import LocalizerConfig
 from tagloc.localize.fix import LocalizeError
 from tagloc.localize.node import LocalizerNode
 from tagloc.localize.outputs import RunRecorder
 from tagloc.messages import Message, PointCloudMsg, TagDetectionsMsg, TransformMsg
-from tagloc.sim.scenarios import ScenarioSource, build_scenario, calibrated_config, scenario_config
+from tagloc.sim.scenarios import ScenarioSource, build_scenario
 from tagloc.supervise import FixSourceSpec
 from tagloc.tags import TagEntry, TagMap
 

@@ -11,11 +11,12 @@ import functools
 import numpy as np
 import pytest
 
+from tagloc.eval.scenarios import localize_scenario
 from tagloc.geometry import SE3
-from tagloc.localize.node_lidar import UNMEASURED_VAR
 from tagloc.localize.projected_update import planar_constraint
 from tagloc.localize.run import FixAttempt, LocalizationRun
-from tagloc.sim.scenarios import build_scenario, localize_scenario
+from tagloc.localize.source_lidar import UNMEASURED_VAR
+from tagloc.sim.scenarios import build_scenario
 
 S = 1_000_000_000
 

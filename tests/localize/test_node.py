@@ -8,12 +8,13 @@ import numpy as np
 import pytest
 
 from tagloc.errors import ConfigError
+from tagloc.eval.scenarios import calibrated_config, scenario_config
 from tagloc.geometry import SE3
 from tagloc.localize import LocalizerConfig
 from tagloc.localize.node import LocalizerNode
 from tagloc.localize.outputs import Estimate, NodeOutput
 from tagloc.messages import OdometryMsg, TransformMsg
-from tagloc.sim.scenarios import ScenarioSource, build_scenario, calibrated_config, scenario_config
+from tagloc.sim.scenarios import ScenarioSource, build_scenario
 from tagloc.supervise import LadderTransition, StatusReport
 
 S = 1_000_000_000

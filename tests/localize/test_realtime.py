@@ -1,8 +1,8 @@
-"""The real-time runner: drop-oldest detection queue, odometry never lost, detector errors
-survived, and the same fused trajectory as the offline pipeline on a simulated stream.
+"""The driver's wall clock: drop-oldest detection queue, odometry never lost, detector errors
+survived, and the same fused trajectory as the replay clock on a simulated stream.
 
 Oracles: the queue's contents by construction; the odometry stamps fed; the frames the fake
-detectors saw; the simulator's ground truth and the offline :class:`LocalizationPipeline`.
+detectors saw; the simulator's ground truth and the replay clock's run.
 """
 
 from __future__ import annotations
@@ -12,22 +12,23 @@ import os
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
+from functools import partial
 
 import numpy as np
 import numpy.typing as npt
 import pytest
 
+from tagloc.eval.scenarios import calibrated_config, scenario_config
 from tagloc.geometry import SE3, SO3
+from tagloc.localize.driver import NodeFactory, record_run, run
 from tagloc.localize.node import LocalizerNode
-from tagloc.localize.outputs import Estimate, NodeOutput, RunRecorder
-from tagloc.localize.pipeline import LocalizationPipeline
-from tagloc.localize.realtime import run_realtime
-from tagloc.localize.realtime_stats import LatencyReservoir
+from tagloc.localize.outputs import Estimate, NodeOutput, OutputSink, RunRecorder
+from tagloc.localize.realtime_stats import LatencyReservoir, RealtimeStats
 from tagloc.localize.realtime_worker import DropOldestQueue, lower_thread_priority
 from tagloc.localize.run import LocalizationRun
 from tagloc.messages import ImageMsg, Message, OdometryMsg, TagDetectionsMsg
-from tagloc.sim.scenarios import ScenarioSource, build_scenario, calibrated_config, scenario_config
+from tagloc.sim.scenarios import ScenarioSource, build_scenario
 from tagloc.tags import TagDetection
 
 S_NS = 1_000_000_000
@@ -39,9 +40,18 @@ def source() -> ScenarioSource:
     return ScenarioSource(build_scenario("default", seed=3, duration_s=20.0))
 
 
-def _node(source: ScenarioSource, *sinks: object, **options: object) -> LocalizerNode:
+def _node(source: ScenarioSource, **options: object) -> NodeFactory:
     config = calibrated_config(source.scenario, scenario_config())
-    return LocalizerNode(source.scenario.tag_map, config, list(sinks), **options)  # type: ignore[arg-type]
+    return partial(LocalizerNode, source.scenario.tag_map, config, **options)  # type: ignore[arg-type]
+
+
+def _wall(
+    node: NodeFactory, stream: Sequence[tuple[str, Message]] | ScenarioSource,
+    sinks: Sequence[OutputSink], **options: object,
+) -> RealtimeStats:  # fmt: skip
+    stats = run(node, stream, sinks, clock="wall", **options).realtime  # type: ignore[arg-type]
+    assert stats is not None
+    return stats
 
 
 def _ate(run: LocalizationRun) -> float:
@@ -82,6 +92,19 @@ class _SleepingDetector:
     def detect(self, image_gray: npt.NDArray[np.generic]) -> list[TagDetection]:
         self.seen.append(_index_of(image_gray))
         time.sleep(self.sleep_s)
+        return []
+
+
+class _UnusedDetector:
+    """The node's own detector, for images fed to it: counts its calls (none expected)."""
+
+    backend, families = "fake", ("tag36h11",)
+
+    def __init__(self) -> None:
+        self.calls = 0
+
+    def detect(self, image_gray: npt.NDArray[np.generic]) -> list[TagDetection]:
+        self.calls += 1
         return []
 
 
@@ -163,10 +186,11 @@ def test_slow_detector_drops_oldest_frames_and_no_odometry_is_lost(
     source: ScenarioSource,
 ) -> None:
     estimates = _Estimates()
-    node = _node(source, estimates, camera=source.camera, T_base_cam=source.T_base_cam)
+    inline = _UnusedDetector()
+    node = _node(source, camera=source.camera, T_base_cam=source.T_base_cam, detector=inline)
     stream = list(_odometry_and_images(1.5))
     detector = _SleepingDetector(0.05)  # 20 frames/s at most, 30 offered
-    stats = run_realtime(node, stream, speed=1.0, queue_size=2, detector=detector)
+    stats = _wall(node, stream, [estimates], speed=1.0, queue_size=2, detector=detector)
     odom_stamps = [m.stamp_ns for _, m in stream if isinstance(m, OdometryMsg)]
     n_frames = sum(isinstance(m, ImageMsg) for _, m in stream)
     assert estimates.stamps == odom_stamps  # every odometry sample, in order
@@ -182,7 +206,7 @@ def test_slow_detector_drops_oldest_frames_and_no_odometry_is_lost(
     assert detector.seen == sorted(set(detector.seen))  # FIFO among the kept frames
     assert detector.seen[-1] == n_frames - 1  # the newest frame is never the one dropped
     assert stats.detector_errors == 0
-    assert node._detector is None  # the node was fed detections, never an image
+    assert inline.calls == 0  # the node was fed detections, never an image
 
 
 def test_detector_errors_are_counted_and_the_other_frames_give_fixes(
@@ -202,8 +226,8 @@ def test_detector_errors_are_counted_and_the_other_frames_give_fixes(
     # paced (2x real time, the worker at the main thread's priority) so the worker, which also
     # forms the fixes, keeps up on a busy machine: as fast as possible, the main thread would
     # finish the stream before most frames are back, and they would all apply at the end
-    stats = run_realtime(_node(source, recorder), stream, speed=2.0, queue_size=len(detections),
-                         detector=_ReplayDetector(detections), worker_nice=0)  # fmt: skip
+    stats = _wall(_node(source), stream, [recorder], speed=2.0, queue_size=len(detections),
+                  detector=_ReplayDetector(detections), worker_nice=0)  # fmt: skip
     assert stats.frames_in == len(detections) and stats.frames_dropped == 0
     assert stats.detector_errors == len(failing) == math.ceil(len(detections) / 3)
     fix_stamps = {a.stamp_ns for a in recorder.fixes if a.accepted}
@@ -214,13 +238,12 @@ def test_detector_errors_are_counted_and_the_other_frames_give_fixes(
     assert _ate(run) < 0.1  # the offline run of this stretch: 0.04 m
 
 
-def test_simulated_stream_at_speed_20_matches_the_offline_pipeline(
+def test_simulated_stream_at_speed_20_matches_the_replay_clock(
     source: ScenarioSource,
 ) -> None:
-    config = calibrated_config(source.scenario, scenario_config())
-    offline = LocalizationPipeline(source.scenario.tag_map, config).run(source)
+    offline = record_run(_node(source), source)
     recorder = RunRecorder()
-    stats = run_realtime(_node(source, recorder), source, speed=20.0)
+    stats = _wall(_node(source), source, [recorder], speed=20.0)
     realtime = recorder.run({})
     assert stats.detections_in == len(source.frames) and stats.frames_in == 0
     assert stats.stream_s == pytest.approx(20.0, abs=0.05)

@@ -9,20 +9,16 @@ from __future__ import annotations
 
 import itertools
 import math
+from functools import partial
 
 import numpy as np
 import pytest
 
-from tagloc.localize.pipeline import LocalizationPipeline
+from tagloc.eval.scenarios import calibrated_config, run_scenario, scenario_config
+from tagloc.localize import LocalizerNode, RunResult, driver
+from tagloc.localize.outputs import RunRecorder
 from tagloc.localize.run import LocalizationRun
-from tagloc.sim.scenarios import (
-    SCENARIOS,
-    ScenarioSource,
-    build_scenario,
-    calibrated_config,
-    run_scenario,
-    scenario_config,
-)
+from tagloc.sim.scenarios import SCENARIOS, ScenarioSource, build_scenario
 
 S = 1_000_000_000
 REINIT = ("initialized", "reinitialized_kidnap")
@@ -54,19 +50,21 @@ def correction_jumps(run: LocalizationRun) -> np.ndarray:
 
 
 @pytest.fixture(scope="module")
-def default_pipeline() -> tuple[LocalizationRun, LocalizationPipeline]:
+def default_pipeline() -> tuple[LocalizationRun, RunResult]:
     scenario = build_scenario("default", seed=0, duration_s=90.0)
     source = ScenarioSource(scenario)
     config = calibrated_config(scenario, scenario_config())
     # every published correction kept, for the cap test (the default keeps the last 1000)
     keep_all = config.filter.model_copy(update={"history_size": 1_000_000})
     config = config.model_copy(update={"filter": keep_all})
-    pipe = LocalizationPipeline(scenario.tag_map, config, frame_truth=source.frame_truth)
-    return pipe.run(source), pipe
+    recorder = RunRecorder()
+    node = partial(LocalizerNode, scenario.tag_map, config, frame_truth=source.frame_truth)
+    result = driver.run(node, source, [recorder])
+    return recorder.run(result.node.metadata()), result
 
 
 @pytest.fixture(scope="module")
-def default_run(default_pipeline: tuple[LocalizationRun, LocalizationPipeline]) -> LocalizationRun:
+def default_run(default_pipeline: tuple[LocalizationRun, RunResult]) -> LocalizationRun:
     return default_pipeline[0]
 
 
@@ -93,11 +91,11 @@ def test_default_drive_fused_beats_odometry(default_run: LocalizationRun) -> Non
 
 
 def test_correction_never_jumps_more_than_the_cap(
-    default_pipeline: tuple[LocalizationRun, LocalizationPipeline],
+    default_pipeline: tuple[LocalizationRun, RunResult],
 ) -> None:
-    run, pipe = default_pipeline
-    cap = pipe.config.cap.max_translation_m
-    updates = pipe.filter.corrections  # every published map -> odom, in order
+    run, result = default_pipeline
+    cap = result.node.config.cap.max_translation_m
+    updates = result.node.filter.corrections  # every published map -> odom, in order
     assert len(updates) > 1000
     snaps = {e.stamp_ns for e in run.events if e.kind in REINIT}
     worst = 0.0

@@ -14,17 +14,12 @@ import numpy as np
 import pytest
 
 from cli_runner import run_tagloc
+from tagloc.eval.scenarios import localize_scenario
 from tagloc.io import BagSource
 from tagloc.messages import Message, OdometryMsg, PointCloudMsg, TransformMsg
 from tagloc.sim.faults import ClockJump, DropMessages, DuplicateMessages, apply_faults
 from tagloc.sim.lidar import LidarSimulator
-from tagloc.sim.scenarios import (
-    SCENARIOS,
-    ScenarioSource,
-    build_scenario,
-    localize_scenario,
-    scenario_premap,
-)
+from tagloc.sim.scenarios import SCENARIOS, ScenarioSource, build_scenario, scenario_premap
 from tagloc.sim.world import load_default_world
 
 S = 1_000_000_000

@@ -155,10 +155,11 @@ def run_demo(
     from tagloc.eval import write_report
     from tagloc.eval.drive_report import summarize_drive
     from tagloc.eval.plots import plot_world_and_paths
+    from tagloc.eval.scenarios import localize_scenario
     from tagloc.fileutil import atomic_write_text, check_outputs
     from tagloc.io import write_tum
     from tagloc.sim import load_default_world, load_world
-    from tagloc.sim.scenarios import ScenarioSource, build_scenario, localize_scenario
+    from tagloc.sim.scenarios import ScenarioSource, build_scenario
 
     check_outputs({"--out": out}, directories={"--out": DEMO_FILES}, inputs={"--world": world_path})
     console = Console()

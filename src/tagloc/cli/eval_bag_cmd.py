@@ -10,6 +10,7 @@ held-out tag (:mod:`tagloc.eval.onsite`), and writes ``summary.json``, ``summary
 from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -100,11 +101,12 @@ def eval_bag(
     from tagloc.eval.onsite_report import ONSITE_FILES, onsite_summary, write_onsite_report
     from tagloc.fileutil import check_outputs
     from tagloc.io import BagSource
-    from tagloc.localize import LocalizeError, load_localizer_config
+    from tagloc.localize import LocalizeError, driver, load_localizer_config
     from tagloc.localize.config import LocalizerConfig
     from tagloc.localize.extrinsic_check import check_run_extrinsics
-    from tagloc.localize.node import NodeTopics
-    from tagloc.localize.pipeline import LocalizationPipeline
+    from tagloc.localize.node import LocalizerNode
+    from tagloc.localize.outputs import RunRecorder
+    from tagloc.messages import NodeTopics
     from tagloc.tags import load_tag_map, make_detector
 
     cam = BagCamera(cameras, camera_poses, tagslam, corner_order)
@@ -148,10 +150,12 @@ def eval_bag(
 
     has_images = image_topic in present
     tap = _ImageTap(image_topic, make_detector(cfg.tags.backend, family) if has_images else None)
-    pipeline = LocalizationPipeline(tag_map, cfg, camera=camera, T_base_cam=T_base_cam,
-                                    topics=topics, name=bag.name)  # fmt: skip
-    run = pipeline.run(tap(stream()))
-    X = pipeline.node.T_base_cam
+    recorder = RunRecorder(bag.name)
+    node = partial(LocalizerNode, tag_map, cfg, camera=camera, T_base_cam=T_base_cam,
+                   topics=topics)  # fmt: skip
+    result = driver.run(node, tap(stream()), [recorder])
+    run = recorder.run(result.node.metadata())
+    X = result.node.T_base_cam
     ext = None if X is None else check_run_extrinsics(run, X)
     stops = detect_stops(run, min_stop_s=min_stop)
     spreads = checkpoint_spreads(stops, spots)

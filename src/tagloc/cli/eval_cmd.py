@@ -62,9 +62,9 @@ def eval_run(
     """Localize a simulated scenario and write its evaluation report to OUT."""
     from tagloc.eval import EvalConfig, write_report
     from tagloc.eval.report import REPORT_FILES
+    from tagloc.eval.scenarios import run_scenario
     from tagloc.fileutil import check_outputs
     from tagloc.io import write_tum
-    from tagloc.sim.scenarios import run_scenario
 
     check_outputs({"--out": out}, directories={"--out": REPORT_FILES})
     config = EvalConfig(

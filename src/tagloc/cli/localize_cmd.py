@@ -13,6 +13,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Iterable
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Literal
 
@@ -37,8 +38,10 @@ if TYPE_CHECKING:
 
     from tagloc.cli.bag_camera import BagCamera
     from tagloc.localize.config import LocalizerConfig
+    from tagloc.localize.driver import NodeFactory
     from tagloc.localize.node import LocalizerNode
     from tagloc.messages import Message
+    from tagloc.tags import TagMap
 
 logger = logging.getLogger(__name__)
 #: Files ``tagloc localize`` writes into ``--out``.
@@ -127,61 +130,68 @@ def localize(
     topics = (odom_topic, detections_topic, image_topic, camera_info_topic, truth_topic, tf_topic,
               lidar_topic)  # fmt: skip
     if scenario is not None:
-        wired = _scenario_node(scenario, seed, duration, cfg, points)
+        wired = _scenario_node(scenario, seed, duration, cfg, points, live=realtime)
     else:
         assert bag is not None
-        wired = _bag_node(bag, tags, cfg, cam, topics, points)
-    if realtime:  # live order: publish each odometry sample before the frames it completes
-        node_cfg = wired.node.config
-        output = node_cfg.output.model_copy(update={"publish_first": True})
-        wired.node.config = node_cfg.model_copy(update={"output": output})
-    written, lines = run_node(wired, out, bag=not no_bag, realtime=speed if realtime else None)
+        wired = _bag_node(bag, tags, cfg, cam, topics, points, live=realtime)
+    written, lines = localize_wired(
+        wired, out, bag=not no_bag, realtime=speed if realtime else None
+    )
     console = Console()
     for line in lines:
         console.print(line)
     console.print(f"wrote {len(written)} files to {out}")
 
 
-@dataclass(slots=True)
+@dataclass(frozen=True, slots=True)
 class WiredNode:
-    """A node and the stream that feeds it."""
+    """The node to build (its configuration fixed) and the stream that feeds it."""
 
-    node: LocalizerNode
+    config: LocalizerConfig
+    node: NodeFactory
     stream: Iterable[tuple[str, Message]]
     name: str
     #: What the camera check found (before any fix), for summary.json.
     camera_check: dict[str, object] | None = None
 
 
-def run_node(
+def live_order(config: LocalizerConfig, live: bool) -> LocalizerConfig:
+    """``--realtime``: each odometry sample published before the frames it completes (the live
+    order, ``output.publish_first``); else ``config`` unchanged."""
+    if not live:
+        return config
+    output = config.output.model_copy(update={"publish_first": True})
+    return config.model_copy(update={"output": output})
+
+
+def localize_wired(
     wired: WiredNode, out: Path, *, bag: bool = True, realtime: float | None = None
 ) -> tuple[list[Path], list[str]]:
-    """Feed the stream through the node with its outputs streaming to files in ``out``
-    (:class:`~tagloc.io.node_sinks.RunFilesSink`); on any failure nothing of this run is left.
-    ``realtime``: pace by the wall clock at this speed, detection on a worker thread."""
+    """Run the node on the stream (:func:`tagloc.localize.driver.run`) with its outputs
+    streaming to files in ``out`` (:class:`~tagloc.io.node_sinks.RunFilesSink`); on any failure
+    nothing of this run is left. ``realtime``: the wall clock at this speed, detection on a
+    worker thread (else the replay clock)."""
     from tagloc.fileutil import atomic_write_text
     from tagloc.io.node_sinks import RunFilesSink
+    from tagloc.localize.driver import run
     from tagloc.localize.extrinsic_check import ExtrinsicRecorder
 
-    node = wired.node
-    sink = RunFilesSink(out, node.config.frames.map_frame, bag=bag, name=wired.name)
+    sink = RunFilesSink(out, wired.config.frames.map_frame, bag=bag, name=wired.name)
     extrinsics = ExtrinsicRecorder()
-    node.sinks += [sink, extrinsics]
     extra: dict[str, object] = {}
     if wired.camera_check is not None:
         extra["camera_check"] = wired.camera_check
     try:
         if realtime is not None:
-            from tagloc.localize.realtime import run_realtime
-
-            stats = run_realtime(node, wired.stream, speed=realtime)
-            extra["realtime"] = stats.to_dict()
-            for line in stats.lines():
+            result = run(wired.node, wired.stream, [sink, extrinsics], clock="wall",
+                         speed=realtime)  # fmt: skip
+            assert result.realtime is not None
+            extra["realtime"] = result.realtime.to_dict()
+            for line in result.realtime.lines():
                 logger.info("%s", line)
         else:
-            for topic, msg in wired.stream:
-                node.feed(topic, msg)
-            node.finish()
+            result = run(wired.node, wired.stream, [sink, extrinsics])
+        node = result.node
         _check_frames(node, sink.counts["frames"])
         check = extrinsics.check(node.T_base_cam)
         extra["extrinsic_check"] = None if check is None else check.to_dict()
@@ -218,39 +228,47 @@ def _read_premap(path: Path) -> np.ndarray:
     return read_ply(path) if suffix == ".ply" else read_pcd(path)
 
 
+def _check_premap(premap: np.ndarray | None, tag_map: TagMap, config: LocalizerConfig) -> None:
+    """Refuse a premap the node cannot use before anything is written (one-line error)."""
+    if premap is not None and config.lidar.enabled:
+        from tagloc.localize.source_lidar import check_premap
+
+        check_premap(premap, tag_map, config.frames.map_frame)
+
+
 def _scenario_node(
     name: str, seed: int, duration: float | None, cfg: LocalizerConfig | None,
-    premap: np.ndarray | None = None,
+    premap: np.ndarray | None = None, *, live: bool = False,
 ) -> WiredNode:  # fmt: skip
     """The scenario's node; with the lidar (the world's robot has one, ``lidar.enabled``) the
     premap is ``premap`` or else the scenario's truth premap."""
+    from tagloc.eval.scenarios import calibrated_config, scenario_config
     from tagloc.localize.node import LocalizerNode
-    from tagloc.sim.scenarios import (
-        ScenarioSource,
-        build_scenario,
-        calibrated_config,
-        scenario_config,
-        scenario_premap,
-    )
+    from tagloc.sim.scenarios import ScenarioSource, build_scenario, scenario_premap
 
     scenario = build_scenario(name, seed=seed, duration_s=duration)
     source = ScenarioSource(scenario)
     config = calibrated_config(scenario, cfg if cfg is not None else scenario_config())
+    config = live_order(config, live)
     if premap is None and config.lidar.enabled and scenario.world.robot.lidar is not None:
         premap = scenario_premap(scenario)
-    node = LocalizerNode(scenario.tag_map, config, frame_truth=source.frame_truth, premap=premap)
-    return WiredNode(node, source, f"scenario:{name}")
+    _check_premap(premap, scenario.tag_map, config)
+    node = partial(
+        LocalizerNode, scenario.tag_map, config, frame_truth=source.frame_truth, premap=premap
+    )
+    return WiredNode(config, node, source, f"scenario:{name}")
 
 
 def _bag_node(
     bag: Path, tags: Path | None, cfg: LocalizerConfig | None, cam: BagCamera,
-    topics: tuple[str, ...], premap: np.ndarray | None = None,
+    topics: tuple[str, ...], premap: np.ndarray | None = None, *, live: bool = False,
 ) -> WiredNode:  # fmt: skip
     from tagloc.cli.bag_camera import bag_camera, check_bag_camera
     from tagloc.io import BagSource
     from tagloc.localize import LocalizeError
     from tagloc.localize.config import LocalizerConfig
-    from tagloc.localize.node import LocalizerNode, NodeTopics
+    from tagloc.localize.node import LocalizerNode
+    from tagloc.messages import NodeTopics
     from tagloc.tags import load_tag_map
 
     if tags is None:
@@ -258,7 +276,8 @@ def _bag_node(
     tag_map = load_tag_map(tags)
     camera, T_base_cam = bag_camera(cam)
     roles = NodeTopics(*topics)
-    family = (cfg or LocalizerConfig()).tags.family
+    config = live_order(cfg or LocalizerConfig(), live)
+    family = config.tags.family
     source = BagSource(bag, corner_order=cam.corner_order, default_family=family)
     if roles.odom not in source.bag_topics and roles.tf not in source.bag_topics:
         raise LocalizeError(
@@ -278,6 +297,7 @@ def _bag_node(
     wanted += [t for t in source.bag_topics if t.rstrip("/").endswith("tf_static")]
     source = BagSource(bag, sorted(set(wanted)), corner_order=cam.corner_order,
                        default_family=family)  # fmt: skip
-    node = LocalizerNode(tag_map, cfg, camera=camera, T_base_cam=T_base_cam, topics=roles,
-                         premap=premap)  # fmt: skip
-    return WiredNode(node, source, bag.name, checked)
+    _check_premap(premap, tag_map, config)
+    node = partial(LocalizerNode, tag_map, config, camera=camera, T_base_cam=T_base_cam,
+                   topics=roles, premap=premap)  # fmt: skip
+    return WiredNode(config, node, source, bag.name, checked)

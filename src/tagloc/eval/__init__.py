@@ -1,6 +1,7 @@
 """Evaluation: trajectory error metrics (ATE with Umeyama alignment, RPE by distance and time;
-equal to evo's on the same trajectories), the reliability protocol, the naive
-baseline beside the filter, drift summaries, plots and the HTML / ``summary.json`` report."""
+equal to evo's on the same trajectories), the reliability protocol, the naive baseline beside the
+filter, drift summaries, plots and the HTML / ``summary.json`` report; the localizer run on
+simulated scenarios (:mod:`tagloc.eval.scenarios`)."""
 
 from tagloc.eval.alignment import Alignment, umeyama_alignment
 from tagloc.eval.association import associate_stamps

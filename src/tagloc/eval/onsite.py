@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -28,11 +29,12 @@ from tagloc._types import FloatArray
 from tagloc.camera import CameraModel
 from tagloc.eval.onsite_stats import ErrorStats, error_stats, fused_pose_at, truth_pose_at
 from tagloc.geometry import SE3
+from tagloc.localize import driver
 from tagloc.localize.config import LocalizerConfig
-from tagloc.localize.node import NodeTopics
-from tagloc.localize.pipeline import LocalizationPipeline
+from tagloc.localize.node import LocalizerNode
+from tagloc.localize.outputs import RunRecorder
 from tagloc.localize.run import LocalizationRun
-from tagloc.messages import Message, TagDetectionsMsg
+from tagloc.messages import Message, NodeTopics, TagDetectionsMsg
 from tagloc.tags import TagMap
 from tagloc.tags.covariance import NoiseModel
 from tagloc.tags.pnp import estimate_tag_poses
@@ -202,13 +204,14 @@ def held_out_tags(
         reduced = TagMap.from_entries(
             (e for e in tag_map if e.key != entry.key), frames=tag_map.frames
         )
-        pipeline = LocalizationPipeline(
-            reduced, config, camera=camera, T_base_cam=T_base_cam, topics=topics,
-            name=f"held_out:{tag_id}",
-        )  # fmt: skip
+        node = partial(
+            LocalizerNode, reduced, config, camera=camera, T_base_cam=T_base_cam, topics=topics
+        )
         tap = _Tap(topics.detections, tag_id, family)
-        run = pipeline.run(tap(stream()))
-        cam, X = pipeline.node.camera, pipeline.node.T_base_cam
+        recorder = RunRecorder(f"held_out:{tag_id}")
+        done = driver.run(node, tap(stream()), [recorder])
+        run = recorder.run(done.node.metadata())
+        cam, X = done.node.camera, done.node.T_base_cam
         if cam is None or X is None or not tap.seen:
             result.unseen.append(tag_id)
             continue

@@ -5,8 +5,9 @@ into place by :meth:`RunFilesSink.close`; :meth:`RunFilesSink.abort` leaves what
 
 - ``fused.tum`` (``T_map_base`` at every odometry sample, from the published correction),
   ``odometry.tum`` and, when the stream has ground truth, ``truth.tum``;
-- ``events.jsonl``: every filter decision and every ladder transition (``kind: ladder`` with
-  ``from``, ``to``, ``reason``), one JSON object per line; ``fixes.jsonl``: every fix attempt;
+- ``events.jsonl``: the filter's own events (initialization, gap, cap, suspect source) and
+  every ladder transition (``kind: ladder`` with ``from``, ``to``, ``reason``), one JSON object
+  per line; ``fixes.jsonl``: every fix attempt with its final decision (and the tested ``d2``);
   ``status.jsonl``: the status messages;
 - ``localization.mcap`` (unless disabled): the published transform on ``/tf`` with the
   configured frame names and ``/localization/pose`` (``PoseWithCovarianceStamped`` of the base
@@ -101,6 +102,7 @@ class RunFilesSink:
                 "decision": output.decision, "range_m": _num(output.range_m),
                 "view_angle_rad": _num(output.view_angle_rad),
                 "false_detection": output.false_detection,
+                "d2": None if output.d2 is None else _num(output.d2),
             })  # fmt: skip
         elif isinstance(output, CameraFrameRecord):
             self.counts["frames"] += 1

@@ -1,6 +1,6 @@
 """Localization: the ``map -> odom`` fusion filter, its gates and its event log; the fiducial
-fix source (:class:`FiducialFixSource`) and the pipeline from a message stream to a
-:class:`LocalizationRun` (:class:`LocalizationPipeline`, :func:`localize`).
+fix source (:class:`FiducialFixSource`), the streaming node (:class:`LocalizerNode`) and its one
+driver (:func:`run`; :func:`record_run` into a :class:`LocalizationRun`).
 
 The filter (:class:`MapOdomFilter`) estimates the correction ``T_map_odom`` from absolute fixes
 (:class:`TagFix`: ``T_map_base`` at a stamp with a right-tangent covariance ``[x, y, z, rx, ry,
@@ -28,6 +28,7 @@ Policies (:class:`FixPolicy`)
 
 from tagloc.localize.candidate import Candidate
 from tagloc.localize.config import LocalizerConfig, load_localizer_config, save_localizer_config
+from tagloc.localize.driver import Clock, RunResult, StreamInputError, record_run, run
 from tagloc.localize.estimator import MapOdomEstimator
 from tagloc.localize.events import EventKind, EventLog, FilterEvent
 from tagloc.localize.fiducial import FiducialConfig, FiducialFixSource, FrameFixes
@@ -50,22 +51,19 @@ from tagloc.localize.gating import (
 )
 from tagloc.localize.iekf import Innovation
 from tagloc.localize.motion import CalibrationModel, PathMotion, ProcessNoise
+from tagloc.localize.node import LocalizerNode
 from tagloc.localize.odometry_path import OdometryPath
-from tagloc.localize.pipeline import (
-    FrameTruth,
-    LocalizationPipeline,
-    PipelineInputError,
-    PipelineTopics,
-    localize,
-)
 from tagloc.localize.policy import FixPolicy
 from tagloc.localize.recovery import KidnapRule, RecoveryBooks, SuspectRule
+from tagloc.localize.registry import available_fix_sources, register_fix_source
 from tagloc.localize.run import CameraFrameRecord, FixAttempt, LocalizationRun
+from tagloc.localize.sources import FixSource
 
 __all__ = [
     "CalibrationModel",
     "CameraFrameRecord",
     "Candidate",
+    "Clock",
     "ConsistencyBuffer",
     "CorrectionCap",
     "CorrectionUpdate",
@@ -77,31 +75,34 @@ __all__ = [
     "FixAttempt",
     "FixPolicy",
     "FixQuality",
+    "FixSource",
     "FrameFixes",
-    "FrameTruth",
     "Innovation",
     "KidnapRule",
-    "LocalizationPipeline",
     "LocalizationRun",
     "LocalizeError",
     "LocalizerConfig",
+    "LocalizerNode",
     "MapOdomEstimator",
     "MapOdomFilter",
     "OdometryPath",
     "PartialFix",
     "PathMotion",
-    "PipelineInputError",
-    "PipelineTopics",
     "PoseWithCovariance",
     "ProcessNoise",
     "QualityLimits",
     "RecoveryBooks",
+    "RunResult",
     "SourceMonitor",
+    "StreamInputError",
     "SuspectRule",
     "TagFix",
+    "available_fix_sources",
     "chi2_threshold",
     "load_localizer_config",
-    "localize",
     "planar_projection_jacobian",
+    "record_run",
+    "register_fix_source",
+    "run",
     "save_localizer_config",
 ]

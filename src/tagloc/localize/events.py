@@ -55,6 +55,16 @@ class EventKind(StrEnum):
 #: Decisions that apply a fix (accepted, or used to (re)initialize the state).
 APPLIED = frozenset({"accepted", "initialized", "reinitialized_kidnap"})
 
+#: Kinds that are decisions on one fix (the rest are the filter's own): the streaming node
+#: hands these on once, final, as the fix's :class:`~tagloc.localize.run.FixAttempt`.
+FIX_DECISIONS = frozenset(
+    {
+        EventKind.ACCEPTED, EventKind.GATED_CHI2, EventKind.GATED_REPROJ, EventKind.GATED_QUALITY,
+        EventKind.REJECTED_SUSPECT, EventKind.NO_ODOMETRY, EventKind.PENDING_CONSISTENCY,
+        EventKind.DISCARDED_CANDIDATE, EventKind.UNUSED_NO_STATE,
+    }
+)  # fmt: skip
+
 #: Kinds logged at INFO (state changes an operator wants to see); WARNING for suspects.
 _INFO = {
     EventKind.INITIALIZED,

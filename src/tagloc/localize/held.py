@@ -4,7 +4,8 @@ A batch decision of the filter (start-up, kidnap, re-acquisition after a gap) ma
 decision of fixes it buffered earlier, within the consistency (or kidnap) window. So the node
 holds each :class:`~tagloc.localize.run.FixAttempt` and :class:`~tagloc.localize.run.
 CameraFrameRecord` until its stamp is older than that window, relabels held fixes when a batch
-uses them, and then hands them on, in the order they were made. Memory: the records of the
+uses them (or when a buffered one is discarded), and then hands them on, in the order they were
+made: each fix's decision leaves once. Memory: the records of the
 last window only.
 """
 
@@ -15,7 +16,7 @@ from collections import Counter, deque
 from collections.abc import Callable, Iterable
 
 from tagloc.localize.events import EventKind
-from tagloc.localize.fix import TagFix
+from tagloc.localize.fix import PartialFix, TagFix
 from tagloc.localize.run import CameraFrameRecord, FixAttempt
 
 __all__ = ["HeldRecords"]
@@ -29,30 +30,53 @@ class HeldRecords:
     def __init__(self, emit: Callable[[Record], None]) -> None:
         self._emit = emit
         self._held: deque[Record] = deque()
-        self._by_fix: dict[int, int] = {}  # id(fix) -> serial of its attempt
+        self._by_fix: dict[int, tuple[int, int]] = {}  # id(fix) -> serial of its attempt, owner
         self._serial0 = 0  # serial of _held[0]
         self._accepted_at: Counter[int] = Counter()  # accepted fixes per frame stamp, released
 
-    def hold(self, record: Record, fix: TagFix | None = None) -> None:
-        """Hold ``record`` (the attempt of ``fix``, when it is one the filter decided on)."""
+    def hold(
+        self, record: Record, fix: TagFix | PartialFix | None = None, owner: int = 0
+    ) -> None:
+        """Hold ``record`` (the attempt of ``fix``, when it is one the filter decided on, from
+        fix source number ``owner``)."""
         if fix is not None:
-            self._by_fix[id(fix)] = self._serial0 + len(self._held)
+            self._by_fix[id(fix)] = (self._serial0 + len(self._held), owner)
         self._held.append(record)
 
-    def relabel(self, batch: Iterable[tuple[TagFix, EventKind]]) -> list[tuple[TagFix, EventKind]]:
+    def relabel(
+        self, batch: Iterable[tuple[TagFix, EventKind]]
+    ) -> list[tuple[TagFix, EventKind, int]]:
         """Give the held attempts of ``batch``'s fixes their final decision; return the fixes
-        relabelled."""
+        whose decision changed, each with its owner (a batch seen again changes nothing)."""
         done = []
         for fix, kind in batch:
-            serial = self._by_fix.get(id(fix))
-            if serial is None or serial < self._serial0:
+            serial, owner = self._by_fix.get(id(fix), (-1, 0))
+            if serial < self._serial0:
                 continue
             i = serial - self._serial0
             a = self._held[i]
-            if isinstance(a, FixAttempt) and a.T_map_base is fix.T_map_base:
+            if (
+                isinstance(a, FixAttempt)
+                and a.T_map_base is fix.T_map_base
+                and a.decision != kind.value
+            ):
                 self._held[i] = dataclasses.replace(a, decision=kind.value)
-                done.append((fix, kind))
+                done.append((fix, kind, owner))
         return done
+
+    def discard(self, stamp_ns: int, source: str) -> None:
+        """A fix held for consistency left the window unused: its held attempt (pending, of
+        ``source`` at ``stamp_ns``) gets that decision."""
+        pending, final = EventKind.PENDING_CONSISTENCY.value, EventKind.DISCARDED_CANDIDATE.value
+        for i, a in enumerate(self._held):
+            if (
+                isinstance(a, FixAttempt)
+                and a.stamp_ns == stamp_ns
+                and a.source == source
+                and a.decision == pending
+            ):
+                self._held[i] = dataclasses.replace(a, decision=final)
+                return
 
     def release(self, horizon_ns: int | None) -> None:
         """Hand on the records stamped before ``horizon_ns`` (all with None), in order; a frame
@@ -68,4 +92,4 @@ class HeldRecords:
                 record = dataclasses.replace(record, n_fixes_accepted=n)
             self._emit(record)
         if len(self._by_fix) > 4 * len(self._held) + 64:
-            self._by_fix = {k: v for k, v in self._by_fix.items() if v >= self._serial0}
+            self._by_fix = {k: v for k, v in self._by_fix.items() if v[0] >= self._serial0}

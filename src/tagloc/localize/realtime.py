@@ -1,8 +1,8 @@
 """Real-time operation of the node: wall-clock pacing, detection on a worker thread, drops.
 
-:func:`run_realtime` feeds a :class:`~tagloc.localize.node.LocalizerNode` from any message
-source (an iterable of ``(topic, record)`` in arrival order: a bag, the simulator) as a live
-robot would see it:
+:func:`run_wall` is the ``clock="wall"`` of the driver (:func:`tagloc.localize.driver.run`): it
+feeds a :class:`~tagloc.localize.node.LocalizerNode` from any message source (an iterable of
+``(topic, record)`` in arrival order: a bag, the simulator) as a live robot would see it:
 
 1. **Pacing.** The record stamped ``t`` is fed at wall time ``start + (t - t0) / speed``
    (``t0``: the first record's stamp); ``speed=None`` or ``inf`` feeds as fast as possible.
@@ -22,7 +22,7 @@ robot would see it:
    for the worker while the source runs (odometry is never blocked by detection), only at the
    end: the queue is drained (every waiting frame detected and fed), then ``node.finish()``.
 
-Latencies are measured by a sink added to the node for the run (definitions in
+Latencies are measured by a sink the node is built with, beside the caller's (definitions in
 :class:`~tagloc.localize.realtime_stats.RealtimeStats`); memory stays bounded.
 """
 
@@ -34,10 +34,10 @@ import math
 import queue
 import threading
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Sequence
 
 from tagloc.localize.node import LocalizerNode
-from tagloc.localize.outputs import Estimate, NodeOutput
+from tagloc.localize.outputs import Estimate, NodeOutput, OutputSink
 from tagloc.localize.realtime_stats import LatencyReservoir, RealtimeStats
 from tagloc.localize.realtime_worker import (
     DetectionJob,
@@ -48,7 +48,7 @@ from tagloc.localize.realtime_worker import (
 from tagloc.messages import ImageMsg, Message, TagDetectionsMsg
 from tagloc.tags import TagDetector, make_detector
 
-__all__ = ["RealtimeStats", "run_realtime"]
+__all__ = ["RealtimeStats", "run_wall"]
 
 logger = logging.getLogger(__name__)
 S_NS = 1_000_000_000
@@ -57,7 +57,7 @@ _MAX_WAITING_FRAMES = 4096
 
 
 class _TimingSink:
-    """Added to the node's sinks for the run: timestamps the ``Estimate`` outputs."""
+    """One of the node's sinks for the run: timestamps the ``Estimate`` outputs."""
 
     def __init__(self) -> None:
         self.odom = LatencyReservoir(seed=1)
@@ -97,11 +97,14 @@ class _TimingSink:
 
 
 class _Runner:
-    """State of one :func:`run_realtime` call (main thread only)."""
+    """State of one :func:`run_wall` call (main thread only)."""
 
-    def __init__(self, node: LocalizerNode, outbox: queue.SimpleQueue[DetectionResult]) -> None:
+    def __init__(
+        self, node: LocalizerNode, timing: _TimingSink,
+        outbox: queue.SimpleQueue[DetectionResult],
+    ) -> None:  # fmt: skip
         self.node, self.outbox = node, outbox
-        self.timing = _TimingSink()
+        self.timing = timing
         self.frames_in = self.dropped = self.errors = self.detections_in = 0
 
     def feed(self, topic: str, msg: Message, due_s: float) -> None:
@@ -140,18 +143,25 @@ class _Runner:
             self.deliver(result)
 
 
-def run_realtime(
-    node: LocalizerNode, source: Iterable[tuple[str, Message]], *, speed: float | None = 1.0,
-    queue_size: int = 2, detector: TagDetector | None = None, worker_nice: int = 10,
-) -> RealtimeStats:  # fmt: skip
-    """Run ``node`` on ``source`` paced by the wall clock, detecting images on a worker thread.
+def run_wall(
+    build: Callable[[Sequence[OutputSink]], LocalizerNode],
+    source: Iterable[tuple[str, Message]], sinks: Sequence[OutputSink] = (), *,
+    speed: float | None = 1.0, queue_size: int = 2, detector: TagDetector | None = None,
+    worker_nice: int = 10,
+    check: Callable[[LocalizerNode, Iterable[tuple[str, Message]]], None] | None = None,
+) -> tuple[LocalizerNode, RealtimeStats]:  # fmt: skip
+    """Run the node ``build(sinks + timing)`` on ``source`` paced by the wall clock, detecting
+    images on a worker thread.
 
     Parameters
     ----------
-    node : LocalizerNode
-        Fed from this (the calling) thread only; ``node.finish()`` is called at the end.
+    build : callable
+        ``build(sinks) -> LocalizerNode``; the node is fed from this (the calling) thread only,
+        and ``finish()`` is called at the end.
     source : iterable of (topic, Message)
         In arrival order (a :class:`~tagloc.messages.MessageSource`).
+    sinks : sequence of OutputSink
+        The node's outputs, as they happen (the timing sink of this run follows them).
     speed : float or None
         Stream seconds per wall second (1.0: real time); None or ``inf``: as fast as possible.
     queue_size : int
@@ -163,10 +173,14 @@ def run_realtime(
         Added to the worker thread's nice value (Linux; 0: unchanged), so that detection
         yields a shared core to the main thread's odometry (on one loaded core it cut the p99
         of odometry due -> estimate by 3-9x, ``benchmarks/bench_realtime.py``).
+    check : callable, optional
+        ``check(node, source)`` before any record is read (the driver's topic check).
 
     Returns
     -------
-    RealtimeStats
+    node : LocalizerNode
+        Finished.
+    stats : RealtimeStats
         Frames, drops, detector errors and latency percentiles (module docstring).
 
     Raises
@@ -181,14 +195,17 @@ def run_realtime(
         raise ValueError(f"speed: must be > 0 (or None), got {speed}")
     inbox: DropOldestQueue[DetectionJob] = DropOldestQueue(queue_size)
     outbox: queue.SimpleQueue[DetectionResult] = queue.SimpleQueue()
+    timing = _TimingSink()
+    node = build((*sinks, timing))
+    if check is not None:
+        check(node, source)
     tags = node.config.tags
     detector = detector if detector is not None else make_detector(tags.backend, tags.family)
     worker = threading.Thread(
         target=detect_loop, args=(detector, inbox, outbox, worker_nice), name="tagloc-detect",
         daemon=True,
     )  # fmt: skip
-    run = _Runner(node, outbox)
-    node.sinks.append(run.timing)
+    run = _Runner(node, timing, outbox)
     t0: int | None = None
     stamp_last, start = 0, time.perf_counter()
     worker.start()
@@ -226,9 +243,7 @@ def run_realtime(
     finally:
         inbox.close(discard=True)
         worker.join()
-        node.sinks.remove(run.timing)
-    timing = run.timing
-    return RealtimeStats(
+    stats = RealtimeStats(
         frames_in=run.frames_in, frames_dropped=run.dropped, detector_errors=run.errors,
         detections_in=run.detections_in, odom_to_estimate=timing.odom.summary(),
         odom_due_to_estimate=timing.odom_due.summary(),
@@ -237,3 +252,4 @@ def run_realtime(
         image_to_correction=timing.correction.summary(), wall_s=time.perf_counter() - start,
         stream_s=0.0 if t0 is None else (stamp_last - t0) / S_NS, speed=rate,
     )  # fmt: skip
+    return node, stats

@@ -92,7 +92,7 @@ class LatencyReservoir:
 
 @dataclass(frozen=True, slots=True)
 class RealtimeStats:
-    """The summary of :func:`tagloc.localize.realtime.run_realtime`.
+    """The summary of :func:`tagloc.localize.realtime.run_wall` (the driver's wall clock).
 
     Attributes
     ----------

@@ -1,5 +1,5 @@
-"""The detection worker of :func:`tagloc.localize.realtime.run_realtime`: a drop-oldest queue
-of camera frames and the thread that detects them.
+"""The detection worker of :func:`tagloc.localize.realtime.run_wall` (the driver's wall
+clock): a drop-oldest queue of camera frames and the thread that detects them.
 
 The worker runs the detector on each frame it takes from the queue and puts the frame's tags,
 or None when the detector raised, on an output queue for the main thread; it never touches the

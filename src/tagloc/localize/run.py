@@ -60,6 +60,9 @@ class FixAttempt:
         Viewing angle of that tag (0 = head-on).
     false_detection : bool or None
         True if built from an injected false detection (simulator), None if unknown (bag).
+    d2 : float or None
+        The squared Mahalanobis distance the filter tested the fix with, when it did (not for
+        a fix decided in a batch: start-up, re-acquisition, kidnap).
     """
 
     stamp_ns: int
@@ -71,6 +74,7 @@ class FixAttempt:
     range_m: float
     view_angle_rad: float
     false_detection: bool | None = None
+    d2: float | None = None
 
     @property
     def accepted(self) -> bool:

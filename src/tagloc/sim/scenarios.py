@@ -28,13 +28,14 @@ Every scenario streams the lidar when its world's robot has one (all built-in wo
 :class:`ScenarioSource` yields the sweeps of :mod:`tagloc.sim.lidar`, occluded by the world's and
 the scenario's people.
 
-Pure: the same name, seed and duration give the same scenario.
+Pure: the same name, seed and duration give the same scenario. This module is the scenario's
+*source* only; running the localizer on a scenario is :mod:`tagloc.eval.scenarios`'.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -43,14 +44,12 @@ import numpy.typing as npt
 from tagloc.config import short_repr
 from tagloc.errors import SimulationError
 from tagloc.geometry import SE3
-from tagloc.localize.config import LocalizerConfig
-from tagloc.localize.outputs import OutputSink
-from tagloc.localize.pipeline import FrameTruth, LocalizationPipeline, PipelineTopics
-from tagloc.localize.run import LocalizationRun
 from tagloc.messages import (
     CameraInfoMsg,
+    FrameTruth,
     GroundTruthMsg,
     Message,
+    NodeTopics,
     OdometryMsg,
     PointCloudMsg,
     TagDetectionsMsg,
@@ -63,7 +62,6 @@ from tagloc.sim.observations import ObservationConfig, simulate_observations
 from tagloc.sim.people import Person, crowd_around
 from tagloc.sim.trajectory import Trajectory
 from tagloc.sim.world import WallMount, World, load_builtin_world, load_default_world
-from tagloc.tags.covariance import NoiseModel
 from tagloc.tags.tagmap import TagEntry, TagMap
 
 __all__ = [
@@ -73,8 +71,6 @@ __all__ = [
     "ScenarioSpec",
     "SplicedDrive",
     "build_scenario",
-    "localize_scenario",
-    "run_scenario",
     "scenario_premap",
     "tag_map_from_world",
     "truncate_drive",
@@ -394,11 +390,11 @@ class ScenarioSource:
     """
 
     def __init__(
-        self, scenario: Scenario, topics: PipelineTopics | None = None, lidar: bool = True
+        self, scenario: Scenario, topics: NodeTopics | None = None, lidar: bool = True
     ) -> None:
         """``lidar``: False leaves the sweeps out even when the robot has a lidar (a run that
         ignores them need not simulate them: 4 ms of CPU per sweep)."""
-        self.scenario, self.t = scenario, topics or PipelineTopics()
+        self.scenario, self.t = scenario, topics or NodeTopics()
         drive = scenario.drive
         self.frames = list(
             simulate_observations(
@@ -472,130 +468,3 @@ class ScenarioSource:
             T = drive.T_odom_base[i]
             yield t.odom, OdometryMsg(stamp, ODOM_FRAME, BASE_FRAME, T, _ODOM_COV)
             yield t.truth, GroundTruthMsg(stamp, MAP_FRAME, drive.T_map_base[i])
-
-
-def run_scenario(
-    name: str,
-    seed: int = 0,
-    duration_s: float | None = None,
-    *,
-    config: LocalizerConfig | None = None,
-    sinks: Sequence[OutputSink] = (),
-    lidar: bool | None = None,
-) -> LocalizationRun:
-    """Simulate scenario ``name`` and localize it against the surveyed tag map.
-
-    Parameters
-    ----------
-    name : str
-        A key of :data:`SCENARIOS`.
-    seed : int
-        Odometry and observation seed.
-    duration_s : float, optional
-        Only the first ``duration_s`` s of the ~700 s route.
-    config : LocalizerConfig, optional
-        The node's configuration (default: :func:`scenario_config`).
-    sinks : sequence of OutputSink
-        More sinks for the node's outputs, as they happen (beside the run's recorder).
-    lidar : bool, optional
-        Use the lidar (the node gets the truth premap, :func:`scenario_premap`); default: when
-        the world's robot has one. ``False`` sets ``lidar.enabled: false`` (tags alone).
-
-    Returns
-    -------
-    LocalizationRun
-        With ground truth, ``kidnaps_ns`` and ``metadata`` (scenario, seed, description,
-        distance travelled, glints injected).
-    """
-    scenario = build_scenario(name, seed, duration_s)
-    return localize_scenario(scenario, config, sinks=sinks, lidar=lidar)
-
-
-def localize_scenario(
-    scenario: Scenario,
-    config: LocalizerConfig | None = None,
-    source: ScenarioSource | None = None,
-    sinks: Sequence[OutputSink] = (),
-    lidar: bool | None = None,
-    premap: npt.NDArray[np.float64] | None = None,
-) -> LocalizationRun:
-    """Localize a built scenario (see :func:`run_scenario`) through the message stream.
-
-    ``source``: the scenario's stream if already built (it does not depend on
-    ``scenario.tag_map``, so runs of one drive against different maps can share it);
-    ``sinks``: more sinks for the node's outputs as they happen. Unless the configuration sets
-    ``tags.noise``, the tag sensor's ``sigma_px`` is the simulated detector's (as one calibrates
-    it on a real detector's corners). ``lidar``: as :func:`run_scenario`'s; ``premap``: the
-    ``(N, 3)`` points in ``map`` the lidar registers against (default: the world's true premap,
-    :func:`scenario_premap`; a survey's premap to localize against a built map).
-
-    Raises
-    ------
-    SimulationError
-        If ``lidar`` is True and the world's robot has no lidar.
-    """
-    has_lidar = scenario.world.robot.lidar is not None
-    if lidar and not has_lidar:
-        raise SimulationError(f"scenario {scenario.name}: the world's robot has no lidar")
-    use_lidar = has_lidar if lidar is None else lidar
-    if source is None:
-        source = ScenarioSource(scenario, lidar=use_lidar)
-    elif source.scenario.drive is not scenario.drive:
-        raise ValueError("localize_scenario: the source was built from another drive")
-    config = calibrated_config(scenario, config if config is not None else scenario_config())
-    if not use_lidar:
-        config = config.model_copy(
-            update={"lidar": config.lidar.model_copy(update={"enabled": False})}
-        )
-    pipeline = LocalizationPipeline(
-        scenario.tag_map, config, frame_truth=source.frame_truth,
-        name=f"scenario:{scenario.name}", sinks=sinks,
-        premap=(scenario_premap(scenario) if premap is None else premap) if use_lidar else None,
-    )  # fmt: skip
-    run = pipeline.run(source)
-    run.kidnaps_ns = list(scenario.kidnaps_ns)
-    run.metadata.update(scenario_metadata(scenario, source))
-    run.metadata["lidar_used"] = use_lidar
-    return run
-
-
-def calibrated_config(scenario: Scenario, config: LocalizerConfig) -> LocalizerConfig:
-    """``config`` with the tag sensor's ``sigma_px`` set to the simulated detector's, unless
-    the configuration sets ``tags.noise`` itself."""
-    if "noise" in config.tags.model_fields_set:
-        return config
-    noise = NoiseModel(sigma_px=max(scenario.observation.pixel_sigma_px, 0.05))
-    tags = config.tags.model_copy(update={"noise": noise})
-    return config.model_copy(update={"tags": tags})
-
-
-def scenario_config() -> LocalizerConfig:
-    """The filter configuration of the scenarios: defaults, planar (the simulated robot walks a
-    flat floor, so z, roll and pitch of ``T_map_odom`` stay 0 and tag fixes' poorer z, roll and
-    pitch are not let into the estimate)."""
-    return LocalizerConfig.model_validate({"filter": {"planar": True}})
-
-
-def scenario_metadata(scenario: Scenario, source: ScenarioSource) -> dict[str, object]:
-    """Facts of a scenario for the run's ``metadata``."""
-    glints = sum(sum(f.false_detection) for f in source.frames)
-    return {
-        "scenario": scenario.name, "seed": scenario.drive.seed,
-        "description": SCENARIOS[scenario.name].description,
-        "distance_m": float(scenario.drive.distance_m[-1] - scenario.drive.distance_m[0]),
-        "duration_s": float(scenario.drive.stamps_ns[-1] - scenario.drive.stamps_ns[0]) / S_NS,
-        "n_camera_frames": len(source.frames), "glints_injected": int(glints),
-        "world": scenario.world.name, "faults": [f.describe() for f in scenario.faults],
-        "lidar": _lidar_summary(scenario), "people": len(scenario.people),
-    }  # fmt: skip
-
-
-def _lidar_summary(scenario: Scenario) -> str | None:
-    lidar = scenario.world.robot.lidar
-    if lidar is None:
-        return None
-    low, high = lidar.vertical_fov_deg
-    return (
-        f"{lidar.rings} rings x {lidar.columns} columns, {low:g} to {high:g} deg, "
-        f"{lidar.horizontal_fov_deg:g} deg, {lidar.rate_hz:g} Hz"
-    )

@@ -1,30 +1,27 @@
-"""The localization pipeline: one code path for simulator and bag, bad input, late frames.
+"""The driver's replay clock: one code path for simulator and bag, bad input, late frames.
 
 Oracle: the simulator's ground truth (and, for the bag path, the simulator path itself).
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from tagloc.cli.localize_cmd import write_stream_bag
+from tagloc.eval.scenarios import calibrated_config, scenario_config
 from tagloc.geometry import SE3
 from tagloc.io import BagSource
-from tagloc.localize import LocalizerConfig
-from tagloc.localize.pipeline import (
-    LocalizationPipeline,
-    PipelineInputError,
-    PipelineTopics,
-    localize,
-)
+from tagloc.localize import LocalizerConfig, LocalizerNode, StreamInputError, record_run
+from tagloc.localize.outputs import RunRecorder
 from tagloc.localize.run import LocalizationRun
-from tagloc.messages import Message, OdometryMsg, TagDetectionsMsg
-from tagloc.sim.scenarios import ScenarioSource, build_scenario, calibrated_config, scenario_config
-from tagloc.tags import TagDetection
+from tagloc.messages import Message, NodeTopics, OdometryMsg, TagDetectionsMsg
+from tagloc.sim.scenarios import ScenarioSource, build_scenario
+from tagloc.tags import TagDetection, TagMap
 
 MS = 1_000_000
 
@@ -34,14 +31,19 @@ def short() -> ScenarioSource:
     return ScenarioSource(build_scenario("default", seed=3, duration_s=20.0))
 
 
-def _run(stream: object, source: ScenarioSource, **kw: object) -> LocalizationRun:
-    return localize(
-        stream,  # type: ignore[arg-type]
-        source.scenario.tag_map,
-        calibrated_config(source.scenario, scenario_config()),
-        frame_truth=source.frame_truth,
-        **kw,  # type: ignore[arg-type]
-    )
+def _localize(
+    stream: Iterable[tuple[str, Message]], tag_map: TagMap, config: LocalizerConfig,
+    **options: object,
+) -> LocalizationRun:  # fmt: skip
+    node = partial(LocalizerNode, tag_map, config, **options)  # type: ignore[arg-type]
+    return record_run(node, stream)
+
+
+def _run(
+    stream: Iterable[tuple[str, Message]], source: ScenarioSource, **kw: object
+) -> LocalizationRun:
+    config = calibrated_config(source.scenario, scenario_config())
+    return _localize(stream, source.scenario.tag_map, config, frame_truth=source.frame_truth, **kw)
 
 
 def _ate(run: LocalizationRun) -> float:
@@ -106,17 +108,19 @@ def _odom(stamp: int, x: float = 0.0) -> OdometryMsg:
 
 
 def test_bad_odometry_stamps_are_counted_skips(short: ScenarioSource) -> None:
-    pipe = LocalizationPipeline(short.scenario.tag_map, LocalizerConfig())
+    recorder = RunRecorder()
+    node = LocalizerNode(short.scenario.tag_map, LocalizerConfig(), [recorder])
     for stamp, x in ((10 * MS, 0.0), (20 * MS, 0.01), (20 * MS, 0.02), (15 * MS, 0.03)):
-        pipe.feed("/odom", _odom(stamp, x))
-    pipe.feed("/odom", _odom(30 * MS, 0.03))
-    run = pipe.finish()
+        node.feed("/odom", _odom(stamp, x))
+    node.feed("/odom", _odom(30 * MS, 0.03))
+    node.finish()
+    run = recorder.run(node.metadata())
     np.testing.assert_array_equal(run.stamps_ns, [10 * MS, 20 * MS, 30 * MS])
-    assert pipe.skipped == {"odom_duplicate_stamp": 1, "odom_stamp_backwards": 1}
+    assert node.skipped == {"odom_duplicate_stamp": 1, "odom_stamp_backwards": 1}
 
 
 def test_nan_odometry_cannot_enter_the_stream() -> None:
-    """NaN is stopped before the pipeline: a record cannot hold it, and a bag's NaN odometry is
+    """NaN is stopped before the node: a record cannot hold it, and a bag's NaN odometry is
     a counted ``non_finite`` skip of :class:`BagSource` (tests/io/test_bag_errors.py)."""
     from tagloc.errors import GeometryError
 
@@ -125,11 +129,11 @@ def test_nan_odometry_cannot_enter_the_stream() -> None:
 
 
 def test_missing_odometry_topic_is_one_clear_error(short: ScenarioSource) -> None:
-    topics = PipelineTopics(odom="/robot/odom")
-    with pytest.raises(PipelineInputError, match=r"'/robot/odom' is not in the input"):
+    topics = NodeTopics(odom="/robot/odom")
+    with pytest.raises(StreamInputError, match=r"'/robot/odom' is not in the input"):
         _run(short, short, topics=topics)
     only_frames = [(t, m) for t, m in short if isinstance(m, TagDetectionsMsg)][:5]
-    with pytest.raises(PipelineInputError, match="no usable odometry on '/odom'"):
+    with pytest.raises(StreamInputError, match="no usable odometry on '/odom'"):
         _run(only_frames, short)
 
 
@@ -146,7 +150,7 @@ def test_unknown_tag_ids_are_counted_rejections(short: ScenarioSource) -> None:
                 msg = TagDetectionsMsg(msg.stamp_ns, msg.frame_id, (*msg.detections, alien))
             yield topic, msg
 
-    run = localize(stream(), short.scenario.tag_map, scenario_config())
+    run = _localize(stream(), short.scenario.tag_map, scenario_config())
     unknown = [a for a in run.fixes if a.decision == "rejected:unknown_tag"]
     assert [a.tag_ids for a in unknown] == [(300,)]
 
