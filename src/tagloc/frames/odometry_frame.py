@@ -14,6 +14,10 @@ from :class:`OdometryFrameConfig`:
   odometry says nothing about gravity, and "up" in the body is the fixed axis ``base_up_axis``
   of a robot standing on the floor (``+z`` for a REP-103 ``base_link``).
 
+- neither (``base_up_axis: null``: a handheld camera with camera-only visual odometry): no
+  "up" is known, and nothing that needs it is used (no gravity prior in the localizer, no
+  vertical split of the map builder's odometry noise).
+
 The defaults (``gravity_aligned: false``, ``base_up_axis: +z``) are right for an upright robot
 base. A handheld rig or a camera-frame body (the body's z looks forward) with a VIO is
 ``gravity_aligned: true``; a rig whose body is an optical frame without gravity is
@@ -50,14 +54,19 @@ class OdometryFrameConfig(StrictModel):
         a level floor).
     up_axis : {"+x", "-x", "+y", "-y", "+z", "-z"}
         The odometry frame's axis that points up, when ``gravity_aligned``.
-    base_up_axis : {"+x", "-x", "+y", "-y", "+z", "-z"}
+    base_up_axis : {"+x", "-x", "+y", "-y", "+z", "-z"} or None
         The body's axis that points up when the robot stands level; used when the odometry is
-        not gravity-aligned.
+        not gravity-aligned. None: no up is known.
     """
 
     gravity_aligned: bool = False
     up_axis: Axis = "+z"
-    base_up_axis: Axis = "+z"
+    base_up_axis: Axis | None = "+z"
+
+    @property
+    def knows_up(self) -> bool:
+        """Whether "up" in the body is known at all (gravity-aligned, or a body axis)."""
+        return self.gravity_aligned or self.base_up_axis is not None
 
     def up_in_base(self, R_odom_base: FloatArray) -> FloatArray:
         """``(K, 3)`` unit "up" in the body at each odometry sample.
@@ -72,10 +81,17 @@ class OdometryFrameConfig(StrictModel):
         (K, 3) float
             ``R_odom_base^T up_odom`` when gravity-aligned, else ``base_up_axis`` at every
             sample.
+
+        Raises
+        ------
+        ValueError
+            No up is known (:attr:`knows_up` is false).
         """
         R = np.asarray(R_odom_base, dtype=np.float64).reshape(-1, 3, 3)
         if self.gravity_aligned:
             return np.asarray(np.einsum("kji,j->ki", R, axis_vector(self.up_axis)))
+        if self.base_up_axis is None:
+            raise ValueError("odometry_frame: no up is known (base_up_axis: null)")
         return np.asarray(np.broadcast_to(axis_vector(self.base_up_axis), (len(R), 3)).copy())
 
 

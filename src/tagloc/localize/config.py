@@ -28,6 +28,7 @@ from pydantic import Field
 
 from tagloc.config import StrictModel, parse_yaml_mapping, read_text_file, validate
 from tagloc.fileutil import atomic_write_text
+from tagloc.frames import OdometryFrameConfig
 from tagloc.localize.config_lidar import LidarConfig
 from tagloc.localize.config_tags import FramesConfig, GatesConfig, TagSensorConfig
 from tagloc.supervise import SupervisorConfig
@@ -171,6 +172,7 @@ class LocalizerConfig(StrictModel):
 
     version: Literal[1] = 1
     frames: FramesConfig = FramesConfig()
+    odometry_frame: OdometryFrameConfig = OdometryFrameConfig()
     process_noise: ProcessNoiseConfig = ProcessNoiseConfig()
     calibration: CalibrationConfig = CalibrationConfig()
     gates: GatesConfig = GatesConfig()

@@ -58,6 +58,10 @@ from tagloc.tags.pnp import TagPoseEstimate
 __all__ = ["FiducialConfig", "FiducialFixSource", "FrameFixes", "ObservationReject", "SourcedFix"]
 
 
+#: An upright base's up axis (REP-103 ``base_link``).
+E_Z = np.array([0.0, 0.0, 1.0])
+
+
 @dataclass(frozen=True, slots=True)
 class FiducialConfig:
     """Tunables of the fix source.
@@ -157,6 +161,9 @@ class FiducialFixSource:
     noise : NoiseModel, optional
     config : FiducialConfig, optional
     map_frame : str
+    up_base : (3,) float or None
+        "Up" in the base when a frame gives none (default ``+z``, an upright base); None: no
+        gravity prior (an odometry that knows no up, such as camera-only visual odometry).
     """
 
     def __init__(
@@ -170,8 +177,10 @@ class FiducialFixSource:
         noise: NoiseModel | None = None,
         config: FiducialConfig | None = None,
         map_frame: str = "map",
+        up_base: FloatArray | None = E_Z,
     ) -> None:
         self.camera, self.T_base_cam = camera, T_base_cam
+        self.up_base = None if up_base is None else np.asarray(up_base, dtype=np.float64)
         self.family = family
         self.gates = gates or GateConfig()
         self.noise = noise or NoiseModel()
@@ -200,6 +209,7 @@ class FiducialFixSource:
         detections: Sequence[TagDetection],
         T_map_base_prior: SE3 | None = None,
         false_detection: Sequence[bool] | None = None,
+        up_base: FloatArray | None = None,
     ) -> FrameFixes:
         """Fixes and refusals of one frame (steps in the module docstring).
 
@@ -212,6 +222,9 @@ class FiducialFixSource:
             The filter's estimate at ``stamp_ns`` (orientation prior of the ambiguity policy).
         false_detection : sequence of bool, optional
             Simulator truth per detection (carried into the results for evaluation only).
+        up_base : (3,) float, optional
+            "Up" in the base at ``stamp_ns`` (:class:`~tagloc.frames.OdometryFrameConfig`);
+            None: the source's default (an upright base's ``+z``, or no gravity at all).
         """
         flags: list[bool | None] | None = (
             list(false_detection) if false_detection is not None else None
@@ -227,12 +240,13 @@ class FiducialFixSource:
             for d, f in zip(detections, flags or [None] * len(detections), strict=True)
             if d.family != self.family
         ]
-        prior = self._gravity()
+        gravity = self._gravity(up_base)
+        prior: PosePrior | None = gravity
         if T_map_base_prior is not None:
-            prior = PosePrior.upright(
-                self.T_base_cam,
-                T_map_cam=T_map_base_prior @ self.T_base_cam,
-                rotation_sigma_rad=self.config.prior_rotation_sigma_rad,
+            prior = PosePrior(
+                T_map_base_prior @ self.T_base_cam,
+                self.config.prior_rotation_sigma_rad,
+                None if gravity is None else gravity.up_cam,
             )
         # 1. ids seen twice are solved one detection at a time
         counts = Counter(d.tag_id for d in dets)
@@ -244,7 +258,7 @@ class FiducialFixSource:
                 continue
             sub = [dets[i] for i in group]
             sub_flags = None if det_flags is None else {dets[i].tag_id: det_flags[i] for i in group}
-            solved, refused = self._solve(stamp_ns, sub, prior, sub_flags)
+            solved, refused = self._solve(stamp_ns, sub, prior, sub_flags, gravity)
             fixes += solved
             rejects += refused
         # 4. one quad read as two ids (a glint on a real tag's corners): keep the reading that
@@ -276,6 +290,7 @@ class FiducialFixSource:
         dets: list[TagDetection],
         prior: PosePrior | None,
         flags: Mapping[int, bool | None] | None,
+        gravity: PosePrior | None,
     ) -> tuple[list[SourcedFix], list[ObservationReject]]:
         """observe_tags on detections of distinct ids; prior conflicts retried on gravity."""
         result = self._observe(dets, prior)
@@ -283,7 +298,7 @@ class FiducialFixSource:
         rejections = list(result.rejections)
         conflicts = {r.tag_id for r in rejections if r.reason is RejectReason.PRIOR_CONFLICT}
         if prior is not None and prior.T_map_cam is not None and conflicts:  # 2. no veto
-            retry = self._observe([d for d in dets if d.tag_id in conflicts], self._gravity())
+            retry = self._observe([d for d in dets if d.tag_id in conflicts], gravity)
             rejections = [r for r in rejections if r.tag_id not in conflicts] + [
                 r for r in retry.rejections if r.tag_id is not None
             ]
@@ -331,8 +346,14 @@ class FiducialFixSource:
             T_base_cam=self.T_base_cam, prior=prior, noise=self.noise,
         )  # fmt: skip
 
-    def _gravity(self) -> PosePrior:
-        return PosePrior.upright(self.T_base_cam)
+    def _gravity(self, up_base: FloatArray | None) -> PosePrior | None:
+        """The gravity prior: "up" in the camera from ``up_base`` (default: the upright base's
+        ``+z``; None when the odometry frame knows no up)."""
+        if up_base is None:
+            up_base = self.up_base
+        if up_base is None:
+            return None
+        return PosePrior(up_cam=self.T_base_cam.rotation.inverse().act(np.asarray(up_base)))
 
     def _tag_fix(self, stamp_ns: int, est: TagPoseEstimate) -> TagFix:
         T_map_cam, cov_map_cam = map_cam_from_tag(

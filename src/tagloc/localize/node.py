@@ -227,7 +227,7 @@ class LocalizerNode:
             T_map_odom = self.latest_T_map_odom  # the newest correction when the worker runs
             return None if T_map_odom is None or T_odom_base is None else T_map_odom @ T_odom_base
 
-        return self._tags.fixer(stamp_ns, frame_id, self._context(), prior)
+        return self._tags.fixer(stamp_ns, frame_id, self._context(), prior, T_odom_base)
 
     def finish(self) -> None:
         """Process the work still waiting for odometry and hand on every held record.

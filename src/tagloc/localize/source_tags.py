@@ -14,6 +14,7 @@ Its own skips: ``frame_duplicate_stamp``, ``image_size_mismatch``, ``detector_er
 
 from __future__ import annotations
 
+import logging
 import math
 from collections import OrderedDict
 from collections.abc import Callable
@@ -22,11 +23,12 @@ from typing import Any
 
 import numpy as np
 
+from tagloc._types import FloatArray
 from tagloc.camera import CameraModel, from_camera_info
 from tagloc.errors import TransformLookupError
 from tagloc.geometry import SE3
 from tagloc.localize.config import LocalizerConfig
-from tagloc.localize.fiducial import FiducialConfig, FiducialFixSource, FrameFixes
+from tagloc.localize.fiducial import E_Z, FiducialConfig, FiducialFixSource, FrameFixes
 from tagloc.localize.run import CameraFrameRecord, FixAttempt
 from tagloc.localize.sources import (
     Arrival,
@@ -40,6 +42,8 @@ from tagloc.localize.sources import (
 from tagloc.messages import CameraInfoMsg, ImageMsg, Message, TagDetectionsMsg
 from tagloc.supervise import FixSourceSpec
 from tagloc.tags import TagDetection
+
+logger = logging.getLogger(__name__)
 
 __all__ = ["MARKERS", "TagSource"]
 
@@ -131,7 +135,8 @@ class TagSource:
                     prior = context.filter.T_map_base_at(frame.stamp_ns)
                 except TransformLookupError:
                     prior = None
-            result = source.frame_fixes(frame.stamp_ns, frame.detections, prior, flags)
+            up_base = self._up_base(context, frame.stamp_ns)
+            result = source.frame_fixes(frame.stamp_ns, frame.detections, prior, flags, up_base)
         dof = context.filter.dof
         refused = tuple(
             FixAttempt(
@@ -170,17 +175,20 @@ class TagSource:
     # ----- the wall clock's worker -----------------------------------------------------------
     def fixer(
         self, stamp_ns: int, frame_id: str, context: FixContext,
-        prior: Callable[[], SE3 | None],
+        prior: Callable[[], SE3 | None], T_odom_base: SE3 | None = None,
     ) -> Fixer | None:  # fmt: skip
         """A function that forms a frame's fixes without touching any state, for a worker
         thread (None until the camera model and extrinsics are known); ``prior()`` is called
-        when it runs, for the orientation prior."""
+        when it runs, for the orientation prior; ``T_odom_base`` (the odometry about the frame's
+        stamp) gives "up" for a gravity-aligned odometry."""
         source = self._fix_source(_Frame(stamp_ns, frame_id, ()), context, quiet=True)
         if source is None:
             return None
 
+        up_base = self._up_from(T_odom_base)
+
         def fixes(stamp: int, detections: tuple[TagDetection, ...]) -> FrameFixes:
-            return source.frame_fixes(stamp, detections, prior(), None)
+            return source.frame_fixes(stamp, detections, prior(), None, up_base)
 
         return fixes
 
@@ -248,8 +256,33 @@ class TagSource:
             self._camera, T_base_cam, self._inputs.tag_map, family=tags.family,
             gates=cfg.gates.observation_gates(), noise=tags.noise, config=fid,
             map_frame=cfg.frames.map_frame,
+            up_base=E_Z if cfg.odometry_frame.knows_up else None,
         )  # fmt: skip
+        if not cfg.odometry_frame.knows_up:
+            logger.warning(
+                "the odometry frame knows no up (odometry_frame.base_up_axis: null): tag fixes "
+                "run without the gravity prior"
+            )
         return self._source
+
+    def _up_base(self, context: FixContext, stamp_ns: int) -> FloatArray | None:
+        """"Up" in the base at ``stamp_ns`` for a gravity-aligned odometry (None: the fix
+        source's default, an upright base's ``+z`` or no up)."""
+        frames = self._config.frames
+        if not self._config.odometry_frame.gravity_aligned:
+            return None
+        try:
+            T = context.buffer.lookup(frames.odom_frame, frames.base_frame, stamp_ns)
+        except TransformLookupError:
+            return None
+        return self._up_from(T)
+
+    def _up_from(self, T_odom_base: SE3 | None) -> FloatArray | None:
+        frame = self._config.odometry_frame
+        if T_odom_base is None or not frame.gravity_aligned:
+            return None
+        up: FloatArray = frame.up_in_base(T_odom_base.rotation.as_matrix()[None])[0]
+        return up
 
 
 def _nearest(result: FrameFixes) -> float:

@@ -193,10 +193,17 @@ def build_tag_map(
     t = time.perf_counter()
     M_anchor, anchor_sigmas = _anchor_indices(anchors, obs, survey.source, config)
     R_odom_base = obs.T_odom_base.as_matrix().reshape(-1, 4, 4)[:, :3, :3]
-    odometry_up = config.odometry_frame.up_in_base(R_odom_base)
+    if not config.odometry_frame.knows_up:  # no vertical to split the odometry noise about
+        logger.info("%s: the odometry frame knows no up: no vertical noise split", survey.source)
+        config = config.model_copy(
+            update={"odometry": config.odometry.model_copy(update={"vertical_factor": 1.0})}
+        )
+        odometry_up = np.tile([0.0, 0.0, 1.0], (len(R_odom_base), 1))
+    else:
+        odometry_up = config.odometry_frame.up_in_base(R_odom_base)
+        _check_odometry_frame(R_odom_base, odometry_up, config, survey.source)
     gravity = config.odometry_frame.gravity_aligned and config.gravity.priors
     priors = Priors(anchor_sigmas, odometry_up if gravity else None, odometry_up)
-    _check_odometry_frame(R_odom_base, odometry_up, config, survey.source)
     M_map_base = initialize_keyframes(obs_init, M_anchor, config.max_ambiguity_for_init)
     M_map_tag = initialize_tags(obs, M_map_base, M_anchor)
     branch = choose_branches(obs, M_map_base, M_map_tag)

@@ -241,7 +241,11 @@ def scan_odometry(
                                                        M_odom[0, :3, 3]),
                                      gtsam.noiseModel.Isotropic.Sigma(6, 1e-6)))  # fmt: skip
     steps = inverse_h(M_odom[:-1]) @ M_odom[1:]
-    up = config.odometry_frame.up_in_base(M_odom[:, :3, :3])
+    up = (
+        config.odometry_frame.up_in_base(M_odom[:, :3, :3])
+        if config.odometry_frame.knows_up
+        else None
+    )
     noise = odometry_whitening(M_odom, config.odometry, up)
     for k, M in enumerate(steps):
         Z = gtsam.Pose3(gtsam.Rot3(M[:3, :3]), M[:3, 3])
