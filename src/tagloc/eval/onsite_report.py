@@ -23,7 +23,7 @@ from tagloc.eval.onsite_checkpoints import CheckpointSpread, Stop
 from tagloc.eval.report_plots import pyplot
 from tagloc.fileutil import atomic_write_texts
 
-__all__ = ["ONSITE_FILES", "onsite_summary", "summary_lines", "write_onsite_report"]
+__all__ = ["ONSITE_FILES", "clean_json", "onsite_summary", "summary_lines", "write_onsite_report"]
 
 #: The files :func:`write_onsite_report` writes into its directory.
 ONSITE_FILES = ("summary.json", "summary.txt", "report.html")
@@ -171,7 +171,7 @@ def write_onsite_report(
     )
     out_dir.mkdir(parents=True, exist_ok=True)
     files = {
-        out_dir / "summary.json": json.dumps(_clean(summary), indent=2, allow_nan=False) + "\n",
+        out_dir / "summary.json": json.dumps(clean_json(summary), indent=2, allow_nan=False) + "\n",
         out_dir / "summary.txt": "\n".join(lines) + "\n",
         out_dir / "report.html": page,
     }
@@ -179,12 +179,12 @@ def write_onsite_report(
     return list(files)
 
 
-def _clean(value: Any) -> Any:
+def clean_json(value: Any) -> Any:
     """NaN and infinities as null (strict JSON)."""
     if isinstance(value, float):
         return value if math.isfinite(value) else None
     if isinstance(value, dict):
-        return {k: _clean(v) for k, v in value.items()}
+        return {k: clean_json(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return [_clean(v) for v in value]
+        return [clean_json(v) for v in value]
     return value
