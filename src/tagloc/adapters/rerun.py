@@ -7,10 +7,11 @@ the timeline ``stream`` (the stamps, as a duration):
 
 - ``map/tags`` (static): every tag of the map frame as a thin box with its id;
   ``map/premap`` (static): the point-cloud premap, thinned to :data:`MAX_PREMAP_POINTS`;
-- ``map/fused``, ``map/odometry``, ``map/truth``: the base's pose (``Transform3D``) at the
-  publication rate, each with ``.../cov``: the 1-sigma position ellipsoid of its covariance in
-  the base frame (the fused estimate's ``cov_map_base``, the odometry message's covariance), and
-  ``map/path/<name>/<k>``: the path as lines of :data:`PATH_POINTS` positions;
+- ``map/fused``, ``map/odometry``, ``map/truth``: the base's pose (``Transform3D``) at up to
+  :data:`POSE_RATE_HZ` (the fused one on the node's publications), each with ``.../cov``: the
+  1-sigma position ellipsoid of its covariance in the base frame (the fused estimate's
+  ``cov_map_base``, the odometry message's covariance), and ``map/path/<name>/<k>``: the path
+  as lines of :data:`PATH_POINTS` positions;
 - ``map/fixes``: each fix attempt's base position, green when the filter accepted it, red
   otherwise, labelled with its decision, and ``map/rays``: lines from it to the tags it saw;
 - ``map/lidar``: each sweep's points in the map through the latest fused pose and the static
@@ -40,12 +41,14 @@ from tagloc.messages import GroundTruthMsg, Message, OdometryMsg, PointCloudMsg,
 from tagloc.supervise import LadderTransition, StatusReport
 from tagloc.tags import TagMap
 
-__all__ = ["MAX_PREMAP_POINTS", "MAX_SWEEP_POINTS", "PATH_POINTS", "RerunSink"]
+__all__ = ["MAX_PREMAP_POINTS", "MAX_SWEEP_POINTS", "PATH_POINTS", "POSE_RATE_HZ", "RerunSink"]
 
 logger = logging.getLogger(__name__)
 MAX_PREMAP_POINTS = 200_000
 MAX_SWEEP_POINTS = 5_000
 PATH_POINTS = 100
+#: Each pose (fused, odometry, truth) is drawn at most this often, per stream second.
+POSE_RATE_HZ = 10.0
 _COLORS = {"fused": (31, 119, 180), "odometry": (214, 39, 40), "truth": (44, 160, 44)}
 _ACCEPTED, _REFUSED = (40, 200, 40), (220, 40, 40)
 
@@ -55,7 +58,8 @@ class RerunSink:
 
     Parameters
     ----------
-    tag_map : TagMap
+    tag_map : TagMap or None
+        Its tags in ``map_frame`` are drawn.
     map_frame : str
         The configured map frame (its tags are drawn).
     base_frame : str
@@ -78,7 +82,7 @@ class RerunSink:
     """
 
     def __init__(
-        self, tag_map: TagMap, *, map_frame: str = "map", base_frame: str = "base_link",
+        self, tag_map: TagMap | None, *, map_frame: str = "map", base_frame: str = "base_link",
         spawn: bool = False, connect: str | None = None, save: Path | None = None,
         premap: np.ndarray | None = None, name: str = "run",
     ) -> None:  # fmt: skip
@@ -100,18 +104,21 @@ class RerunSink:
         self.rec.set_sinks(*sinks)
         self.map_frame, self.base_frame = map_frame, base_frame
         self._paths: dict[str, tuple[int, list[tuple[float, float, float]]]] = {}
+        self._step_ns, self._stamp_ns = round(1e9 / POSE_RATE_HZ), 0
+        self._next_ns: dict[str, int] = {}
         self._T_map_base: SE3 | None = None
         self._T_base_frame: dict[str, SE3] = {}
         self._accepted = 0
         self._tag_centres = {
-            e.id: np.asarray(e.T_frame_tag().translation) for e in tag_map if e.frame == map_frame
-        }
+            e.id: np.asarray(e.T_frame_tag().translation) for e in tag_map or ()
+            if e.frame == map_frame
+        }  # fmt: skip
         self._static(tag_map, premap)
 
     # ----- static scene ----------------------------------------------------------------------
-    def _static(self, tag_map: TagMap, premap: np.ndarray | None) -> None:
+    def _static(self, tag_map: TagMap | None, premap: np.ndarray | None) -> None:
         rr = self._rr
-        entries = [e for e in tag_map if e.frame == self.map_frame]
+        entries = [e for e in tag_map or () if e.frame == self.map_frame]
         if entries:
             poses = [e.T_frame_tag() for e in entries]
             self.rec.log("map/tags", rr.Boxes3D(
@@ -188,8 +195,9 @@ class RerunSink:
     def _pose(self, name: str, T_map_base: SE3, cov: np.ndarray | None) -> None:
         rr = self._rr
         t = np.asarray(T_map_base.translation, dtype=np.float64)
-        if not np.isfinite(t).all():
+        if not np.isfinite(t).all() or self._stamp_ns < self._next_ns.get(name, -(2**62)):
             return
+        self._next_ns[name] = self._stamp_ns + self._step_ns
         self.rec.log(f"map/{name}", rr.Transform3D(
             translation=t, quaternion=rr.Quaternion(xyzw=T_map_base.as_quat())))  # fmt: skip
         if cov is not None and np.isfinite(cov[:3, :3]).all():
@@ -210,6 +218,7 @@ class RerunSink:
         self._paths[name] = (k + 1, [path[-1]]) if len(path) >= PATH_POINTS else (k, path)
 
     def _time(self, stamp_ns: int) -> None:
+        self._stamp_ns = stamp_ns
         self.rec.set_time("stream", duration=np.timedelta64(int(stamp_ns), "ns"))
 
     def close(self) -> None:

@@ -39,12 +39,13 @@ if TYPE_CHECKING:
     from tagloc.localize.config import LocalizerConfig
     from tagloc.localize.node import LocalizerNode
     from tagloc.messages import Message
+    from tagloc.tags import TagMap
 
 logger = logging.getLogger(__name__)
 #: Files ``tagloc localize`` writes into ``--out``.
 OUTPUT_FILES = (
     "fused.tum", "odometry.tum", "truth.tum", "events.jsonl", "fixes.jsonl", "status.jsonl",
-    "localization.mcap", "summary.json", "summary.txt", "localizer.yaml",
+    "localization.mcap", "summary.json", "summary.txt", "localizer.yaml", "report.html",
 )  # fmt: skip
 
 
@@ -96,6 +97,12 @@ def localize(
     speed: Annotated[
         float, typer.Option(help="With --realtime: speed factor.", callback=in_range(gt=0, le=1e3))
     ] = 1.0,
+    view: Annotated[
+        bool, typer.Option("--view", help="Watch it live (rerun; tagloc[view]).")
+    ] = False,
+    view_save: Annotated[
+        Path | None, typer.Option(help="Record the live view to this .rrd file.")
+    ] = None,
 ) -> None:  # fmt: skip
     """Localize a bag or a simulated scenario against a tag map, streaming every output to files."""
     from rich.console import Console
@@ -108,7 +115,7 @@ def localize(
 
     cam = BagCamera(cameras, camera_poses, tagslam, corner_order)
     check_outputs(
-        {"--out": out}, directories={"--out": OUTPUT_FILES},
+        {"--out": out, "--view-save": view_save}, directories={"--out": OUTPUT_FILES},
         inputs={"BAG": bag, "--tags": tags, "--config": config, "--premap": premap,
                 **cam.inputs()},
     )  # fmt: skip
@@ -126,7 +133,14 @@ def localize(
         node_cfg = wired.node.config
         output = node_cfg.output.model_copy(update={"publish_first": True})
         wired.node.config = node_cfg.model_copy(update={"output": output})
-    written, lines = run_node(wired, out, bag=not no_bag, realtime=speed if realtime else None)
+    from tagloc.cli.live import attach_live
+
+    live = attach_live(wired, wired.tag_map, view=view, view_save=view_save, premap=wired.premap)
+    try:
+        written, lines = run_node(wired, out, bag=not no_bag, realtime=speed if realtime else None)
+    finally:
+        live.close()
+    written.append(live.finish(out, lines))
     console = Console()
     for line in lines:
         console.print(line)
@@ -142,6 +156,9 @@ class WiredNode:
     name: str
     #: What the camera check found (before any fix), for summary.json.
     camera_check: dict[str, object] | None = None
+    #: The map and premap the node localizes against (for the view).
+    tag_map: TagMap | None = None
+    premap: np.ndarray | None = None
 
 
 def run_node(
@@ -230,7 +247,7 @@ def _scenario_node(
     if premap is None and config.lidar.enabled and scenario.world.robot.lidar is not None:
         premap = scenario_premap(scenario)
     node = LocalizerNode(scenario.tag_map, config, frame_truth=source.frame_truth, premap=premap)
-    return WiredNode(node, source, f"scenario:{name}")
+    return WiredNode(node, source, f"scenario:{name}", None, scenario.tag_map, premap)
 
 
 def _bag_node(
@@ -271,4 +288,4 @@ def _bag_node(
                        default_family=family)  # fmt: skip
     node = LocalizerNode(tag_map, cfg, camera=camera, T_base_cam=T_base_cam, topics=roles,
                          premap=premap)  # fmt: skip
-    return WiredNode(node, source, bag.name, checked)
+    return WiredNode(node, source, bag.name, checked, tag_map, premap)
