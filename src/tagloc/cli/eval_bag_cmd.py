@@ -185,7 +185,7 @@ def eval_bag(
         extrinsic_check=None if ext is None else ext.to_dict(), camera_check=camera_check,
         run_facts=facts,
     )  # fmt: skip
-    write_onsite_report(summary, held, stops, out)
+    write_onsite_report(summary, held, stops, out, run)
     from tagloc.eval.onsite_report import summary_lines
 
     for line in summary_lines(summary):

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from tagloc.eval.fleet import LogResult, pooled
-from tagloc.eval.onsite_report import clean_json
+from tagloc.eval.onsite_report import HELD_OUT_P95_M, clean_json
 from tagloc.eval.protocol import EvalConfig
 from tagloc.eval.report_plots import pyplot
 from tagloc.eval.report_style import figure, page, table, verdict
@@ -27,8 +27,6 @@ __all__ = ["FLEET_FILES", "HELD_OUT_P95_M", "fleet_summary", "fleet_verdict", "s
            "write_fleet_report"]  # fmt: skip
 
 FLEET_FILES = ("summary.json", "summary.txt", "report.html")
-#: Without ground truth: the held-out tags' position error p95 a fleet should stay within, m.
-HELD_OUT_P95_M = 0.10
 LEVELS = ("lidar_nominal", "markers_carry", "markers_alone", "odometry_only")
 
 

@@ -111,6 +111,7 @@ class RunReportSink:
         parts.append(figure(trajectory_png(paths), "trajectory"))
         if self.ladder and self.t0_ns is not None:
             t = [(s - self.t0_ns) * 1e-9 for s, _ in self.ladder]
+            t[0] = 0.0  # the first move's "from" level held since the start
             t.append((self.t_end_ns - self.t0_ns) * 1e-9)
             levels = [lv for _, lv in self.ladder] + [self.ladder[-1][1]]
             parts += ["<h2>Degradation ladder</h2>",
