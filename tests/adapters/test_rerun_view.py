@@ -66,7 +66,9 @@ def test_the_fused_pose_is_the_published_one(recorded: tuple[Path, dict[str, lis
     stamps_ns, T_map_base = read_tum(out / "fused.tum")
     by_stamp = {int(s): i for i, s in enumerate(stamps_ns)}
     fused = rows["/map/fused"]
-    assert len(fused) >= DURATION_S * 5  # at up to 10 Hz, from initialization on
+    stamps = np.array([s for s, _ in fused])
+    assert len(fused) >= 5 and np.diff(stamps).min() >= 0.1e9 - 1  # at up to 10 Hz
+    assert stamps[-1] >= stamps_ns[-1] - 0.2e9  # from initialization to the end
     xyz = np.asarray(T_map_base.translation)
     for stamp, values in fused:
         np.testing.assert_allclose(values["Transform3D:translation"][0], xyz[by_stamp[stamp]],

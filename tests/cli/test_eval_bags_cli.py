@@ -51,8 +51,8 @@ def _eval_bags(logs: list[Path], out: Path, *extra: str) -> dict:
 
 
 def _numbers(log: dict) -> dict:
-    """A log's results without how it ran (wall time)."""
-    return {k: v for k, v in log.items() if k != "wall_s"}
+    """A log's results without how it ran (wall time) and its label among the others."""
+    return {k: v for k, v in log.items() if k not in ("wall_s", "name")}
 
 
 def _check_against_single_runs(logs: list[Path], summary: dict, tmp_path: Path) -> None:
@@ -97,6 +97,8 @@ def test_eval_bags_gives_each_drive_its_own_numbers(drives: list[Path], tmp_path
     # one log alone in series: the same numbers as beside the others in the pool
     one = _eval_bags(logs[1:2], tmp_path / "one", "--jobs", "1")
     assert _numbers(one["logs"][0]) == _numbers(summary["logs"][1])
+    names = [x["name"] for x in summary["logs"]]
+    assert names == [f"drive{i}/drive.mcap" for i in range(len(logs))]
     assert "verdict" in (tmp_path / "fleet" / "summary.txt").read_text()
 
 

@@ -10,6 +10,7 @@ pool, or a Ray cluster) and the results are merged per log (:mod:`tagloc.eval.fl
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -121,6 +122,7 @@ def eval_bags(
                         tf_topic)  # fmt: skip
     loaded = {m: load_tag_map(m) for m in set(maps.values())}
     names = [log.name for log in logs]
+    common = os.path.commonpath([log.resolve().parent for log in logs])  # for names seen twice
     specs = []
     for log, name in zip(logs, names, strict=True):
         tag_map = loaded[maps[log]]
@@ -129,7 +131,7 @@ def eval_bags(
             raise LocalizeError(f"--hold-out {unknown[0]}: no tag {family}:{unknown[0]} in "
                                 f"{maps[log]}")  # fmt: skip
         wanted = bag_topics_to_read(log, topics, corner_order, family)
-        label = str(log) if names.count(name) > 1 else name
+        label = name if names.count(name) == 1 else os.path.relpath(log.resolve(), common)
         specs.append(LogSpec(
             label, BagStream(log, tuple(wanted), corner_order, family), tag_map, cfg, topics,
             camera, T_base_cam, tuple(hold_out), family, max_range, EvalConfig(),
