@@ -31,6 +31,7 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, 
         "--out", str(d / "run"), "--view-save", str(d / "run.rrd"),
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
+    assert sorted(p.name for p in d.iterdir()) == ["run", "run.rrd"]  # renamed into place
     rows: dict[str, list] = defaultdict(list)
     for chunk in rr_chunk.RrdReader(d / "run.rrd").stream():
         batch = chunk.to_record_batch()

@@ -69,7 +69,8 @@ class RerunSink:
     connect : str, optional
         Stream to a running viewer at this gRPC URL (``rerun+http://host:9876/proxy``).
     save : Path, optional
-        Record everything to this ``.rrd`` file.
+        Record everything to this ``.rrd`` file (written beside it as ``.NAME.partial`` and
+        renamed into place by :meth:`close`; :meth:`abort` removes it).
     premap : (N, 3) float, optional
         The lidar premap, in the map frame.
     name : str
@@ -95,8 +96,10 @@ class RerunSink:
         self._rr: Any = rr
         self.rec: Any = rr.RecordingStream("tagloc", recording_id=name)
         sinks: list[Any] = []
-        if save is not None:
-            sinks.append(rr.FileSink(str(save)))
+        self.save = save
+        self._partial = None if save is None else save.with_name(f".{save.name}.partial")
+        if self._partial is not None:
+            sinks.append(rr.FileSink(str(self._partial)))
         if spawn:
             self.rec.spawn(connect=False)
         if spawn or connect:
@@ -221,7 +224,17 @@ class RerunSink:
         self._stamp_ns = stamp_ns
         self.rec.set_time("stream", duration=np.timedelta64(int(stamp_ns), "ns"))
 
-    def close(self) -> None:
-        """Flush everything to the viewer and the file."""
+    def close(self) -> Path | None:
+        """Flush everything to the viewer and the file (renamed into place); return the file."""
         self.rec.flush()
         self.rec.disconnect()
+        if self._partial is None or self.save is None:
+            return None
+        self._partial.replace(self.save)
+        return self.save
+
+    def abort(self) -> None:
+        """Stop streaming and remove the unfinished file (an existing one is left as it was)."""
+        self.rec.disconnect()
+        if self._partial is not None:
+            self._partial.unlink(missing_ok=True)

@@ -1,8 +1,8 @@
 """The sinks ``tagloc localize`` adds beside its files: the status line, the report, the view.
 
 :func:`attach_live` puts them on a wired node (and the view's tap on its stream);
-:meth:`LiveSinks.finish` writes ``report.html`` after the run's files; :meth:`LiveSinks.close`
-ends the status line and flushes the view, whatever happened.
+:meth:`LiveSinks.close` writes ``report.html`` after the run's files and finishes the view's
+``.rrd``; :meth:`LiveSinks.abort`, after a failure, leaves neither.
 """
 
 from __future__ import annotations
@@ -29,18 +29,22 @@ class LiveSinks:
     report: RunReportSink
     view: RerunSink | None
 
-    def finish(self, out: Path, summary_lines: list[str]) -> Path:
-        """Write ``out/report.html``; return its path."""
+    def close(self, out: Path, summary_lines: list[str]) -> list[Path]:
+        """After a run that ended well: end the status line, write ``out/report.html``, finish
+        the view's file; return the paths written."""
         from tagloc.fileutil import atomic_write_text
 
+        self.status.close()
         path = out / "report.html"
         atomic_write_text(path, self.report.html(summary_lines))
-        return path
+        saved = None if self.view is None else self.view.close()
+        return [path] + ([saved] if saved is not None else [])
 
-    def close(self) -> None:
+    def abort(self) -> None:
+        """After a failed run: end the status line, drop the view's unfinished file."""
         self.status.close()
         if self.view is not None:
-            self.view.close()
+            self.view.abort()
 
 
 def attach_live(

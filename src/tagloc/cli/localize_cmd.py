@@ -138,9 +138,10 @@ def localize(
     live = attach_live(wired, wired.tag_map, view=view, view_save=view_save, premap=wired.premap)
     try:
         written, lines = run_node(wired, out, bag=not no_bag, realtime=speed if realtime else None)
-    finally:
-        live.close()
-    written.append(live.finish(out, lines))
+    except BaseException:
+        live.abort()
+        raise
+    written += live.close(out, lines)
     console = Console()
     for line in lines:
         console.print(line)
