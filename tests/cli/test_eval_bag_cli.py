@@ -48,6 +48,16 @@ def test_eval_bag_writes_its_report(sim_bag: Path, tmp_path: Path) -> None:
     assert summary["acceptance"]["note"].startswith("the bag has pre-detected corners only")
     assert summary["checkpoints"]["from"].endswith("cp.yaml")
     assert "held-out tags" in done.stdout and "fix acceptance" in done.stdout
+    # the verdict, from the held-out tags' p95 (and the extrinsic check's warning)
+    p95 = overall["p95"]
+    verdict = summary["verdict"]
+    warned = bool(summary["extrinsic_check"] and summary["extrinsic_check"]["warning"])
+    assert verdict["passed"] is (p95 <= 0.10 and not warned)
+    assert f"p95 {p95 * 100:.1f} cm" in verdict["reason"]
+    page = (out / "report.html").read_text()
+    for section in ("verdict", "Trajectory (top-down)", "Fix decisions (refusals by reason)",
+                    "Held-out tags"):  # fmt: skip
+        assert section in page
 
 
 def test_eval_bag_unknown_held_out_tag_is_one_line(sim_bag: Path, tmp_path: Path) -> None:

@@ -10,6 +10,7 @@ import typer
 from tagloc.cli import localize_cmd
 from tagloc.cli.detect_cmd import detect
 from tagloc.cli.eval_bag_cmd import eval_bag  # noqa: F401  (registers tagloc eval bag)
+from tagloc.cli.eval_bags_cmd import eval_bags  # noqa: F401  (registers tagloc eval bags)
 from tagloc.cli.eval_cmd import eval_app
 from tagloc.cli.eval_tags_cmd import eval_tags  # noqa: F401  (registers tagloc eval tags)
 from tagloc.cli.map_cmd import map_app

@@ -27,6 +27,7 @@ from tagloc.cli.bag_camera import (
     TagslamOpt,
     TfTopicOpt,
 )
+from tagloc.cli.engine_opts import JobsOpt, RayOpt
 from tagloc.cli.eval_cmd import eval_app
 from tagloc.cli.options import in_range
 
@@ -88,12 +89,15 @@ def eval_bag(
     min_stop: Annotated[
         float, typer.Option(help="A stop: still for this long, s.", callback=in_range(gt=0))
     ] = 2.0,
+    jobs: JobsOpt = 1,
+    ray: RayOpt = None,
 ) -> None:  # fmt: skip
     """Evaluate localization on a bag without ground truth: held-out tags, checkpoint
     repeatability, fix acceptance by conditions, the camera's extrinsics."""
     from rich.progress import Progress
 
     from tagloc.cli.bag_camera import BagCamera, bag_camera, check_bag_camera
+    from tagloc.cli.engine_opts import make_engine
     from tagloc.config import read_text_file
     from tagloc.eval.onsite import held_out_tags
     from tagloc.eval.onsite_checkpoints import checkpoint_spreads, detect_stops, parse_checkpoints
@@ -101,6 +105,7 @@ def eval_bag(
     from tagloc.eval.onsite_report import ONSITE_FILES, onsite_summary, write_onsite_report
     from tagloc.fileutil import check_outputs
     from tagloc.io import BagSource
+    from tagloc.io.bag_stream import BagStream
     from tagloc.localize import LocalizeError, driver, load_localizer_config
     from tagloc.localize.config import LocalizerConfig
     from tagloc.localize.extrinsic_check import check_run_extrinsics
@@ -145,9 +150,9 @@ def eval_bag(
     wanted += [t for t in present if t.rstrip("/").endswith("tf_static")]
     wanted = sorted(set(wanted))
 
-    def stream() -> BagSource:
-        return BagSource(bag, wanted, corner_order=corner_order, default_family=family)
+    stream = BagStream(bag, tuple(wanted), corner_order, family)
 
+    engine = None if no_hold_out else make_engine(jobs, ray)  # a bad --ray before any work
     has_images = image_topic in present
     tap = _ImageTap(image_topic, make_detector(cfg.tags.backend, family) if has_images else None)
     recorder = RunRecorder(bag.name)
@@ -161,18 +166,18 @@ def eval_bag(
     spreads = checkpoint_spreads(stops, spots)
     acceptance = acceptance_by_conditions(run.fixes, tap.measures if tap.images else None)
     held = None
-    if not no_hold_out:
+    if engine is not None:
         ids = hold_out or list(tag_map.ids(family))
-        with Progress(transient=True) as bar:
-            task = bar.add_task("held-out tags", total=len(ids))
-
-            def progress(k: int, n: int, tag_id: int) -> None:
-                bar.update(task, completed=k, description=f"holding out tag {tag_id}")
-
-            held = held_out_tags(
-                stream, tag_map, cfg, tag_ids=ids, camera=camera, T_base_cam=T_base_cam,
-                topics=topics, family=family, max_range_m=max_range, progress=progress,
-            )  # fmt: skip
+        try:
+            with Progress(transient=True) as bar:
+                task = bar.add_task(f"held-out tags ({engine.jobs} at once)", total=len(ids))
+                held = held_out_tags(
+                    stream, tag_map, cfg, tag_ids=ids, camera=camera, T_base_cam=T_base_cam,
+                    topics=topics, family=family, max_range_m=max_range, engine=engine,
+                    progress=lambda done, n: bar.update(task, completed=done),
+                )  # fmt: skip
+        finally:
+            engine.close()
     facts = {
         "odometry_samples": len(run.stamps_ns), "camera_frames": len(run.frames),
         "fixes_accepted": sum(f.accepted for f in run.fixes), "fix_attempts": len(run.fixes),
@@ -184,7 +189,7 @@ def eval_bag(
         extrinsic_check=None if ext is None else ext.to_dict(), camera_check=camera_check,
         run_facts=facts,
     )  # fmt: skip
-    write_onsite_report(summary, held, stops, out)
+    write_onsite_report(summary, held, stops, out, run)
     from tagloc.eval.onsite_report import summary_lines
 
     for line in summary_lines(summary):

@@ -11,7 +11,7 @@ Each file is renamed into place only when the run ends well; on a failure nothin
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
@@ -40,6 +40,7 @@ if TYPE_CHECKING:
     from tagloc.localize.config import LocalizerConfig
     from tagloc.localize.driver import NodeFactory
     from tagloc.localize.node import LocalizerNode
+    from tagloc.localize.outputs import OutputSink
     from tagloc.messages import Message
     from tagloc.tags import TagMap
 
@@ -47,7 +48,7 @@ logger = logging.getLogger(__name__)
 #: Files ``tagloc localize`` writes into ``--out``.
 OUTPUT_FILES = (
     "fused.tum", "odometry.tum", "truth.tum", "events.jsonl", "fixes.jsonl", "status.jsonl",
-    "localization.mcap", "summary.json", "summary.txt", "localizer.yaml",
+    "localization.mcap", "summary.json", "summary.txt", "localizer.yaml", "report.html",
 )  # fmt: skip
 
 
@@ -108,6 +109,12 @@ def localize(
     speed: Annotated[
         float, typer.Option(help="With --realtime: speed factor.", callback=in_range(gt=0, le=1e3))
     ] = 1.0,
+    view: Annotated[
+        bool, typer.Option("--view", help="Watch it live (rerun; tagloc[view]).")
+    ] = False,
+    view_save: Annotated[
+        Path | None, typer.Option(help="Record the live view to this .rrd file.")
+    ] = None,
 ) -> None:  # fmt: skip
     """Localize a bag or a simulated scenario against a tag map, streaming every output to files."""
     from rich.console import Console
@@ -120,7 +127,7 @@ def localize(
 
     cam = BagCamera(cameras, camera_poses, tagslam, corner_order)
     check_outputs(
-        {"--out": out}, directories={"--out": OUTPUT_FILES},
+        {"--out": out, "--view-save": view_save}, directories={"--out": OUTPUT_FILES},
         inputs={"BAG": bag, "--tags": tags, "--config": config, "--premap": premap,
                 **cam.inputs()},
     )  # fmt: skip
@@ -134,9 +141,17 @@ def localize(
     else:
         assert bag is not None
         wired = _bag_node(bag, tags, cfg, cam, topics, points, live=realtime)
-    written, lines = localize_wired(
-        wired, out, bag=not no_bag, realtime=speed if realtime else None
-    )
+    from tagloc.cli.live import attach_live
+
+    wired, live = attach_live(wired, view=view, view_save=view_save)
+    try:
+        written, lines = localize_wired(
+            wired, out, bag=not no_bag, realtime=speed if realtime else None, sinks=live.sinks
+        )
+    except BaseException:
+        live.abort()
+        raise
+    written += live.close(out, lines)
     console = Console()
     for line in lines:
         console.print(line)
@@ -153,6 +168,9 @@ class WiredNode:
     name: str
     #: What the camera check found (before any fix), for summary.json.
     camera_check: dict[str, object] | None = None
+    #: The map and premap the node localizes against (for the view).
+    tag_map: TagMap | None = None
+    premap: np.ndarray | None = None
 
 
 def live_order(config: LocalizerConfig, live: bool) -> LocalizerConfig:
@@ -165,12 +183,14 @@ def live_order(config: LocalizerConfig, live: bool) -> LocalizerConfig:
 
 
 def localize_wired(
-    wired: WiredNode, out: Path, *, bag: bool = True, realtime: float | None = None
+    wired: WiredNode, out: Path, *, bag: bool = True, realtime: float | None = None,
+    sinks: Sequence[OutputSink] = (),
 ) -> tuple[list[Path], list[str]]:
     """Run the node on the stream (:func:`tagloc.localize.driver.run`) with its outputs
     streaming to files in ``out`` (:class:`~tagloc.io.node_sinks.RunFilesSink`); on any failure
     nothing of this run is left. ``realtime``: the wall clock at this speed, detection on a
-    worker thread (else the replay clock)."""
+    worker thread (else the replay clock); ``sinks``: more outputs beside the files (the status
+    line, the report, the view)."""
     from tagloc.fileutil import atomic_write_text
     from tagloc.io.node_sinks import RunFilesSink
     from tagloc.localize.driver import run
@@ -183,14 +203,14 @@ def localize_wired(
         extra["camera_check"] = wired.camera_check
     try:
         if realtime is not None:
-            result = run(wired.node, wired.stream, [sink, extrinsics], clock="wall",
+            result = run(wired.node, wired.stream, [sink, extrinsics, *sinks], clock="wall",
                          speed=realtime)  # fmt: skip
             assert result.realtime is not None
             extra["realtime"] = result.realtime.to_dict()
             for line in result.realtime.lines():
                 logger.info("%s", line)
         else:
-            result = run(wired.node, wired.stream, [sink, extrinsics])
+            result = run(wired.node, wired.stream, [sink, extrinsics, *sinks])
         node = result.node
         _check_frames(node, sink.counts["frames"])
         check = extrinsics.check(node.T_base_cam)
@@ -256,7 +276,7 @@ def _scenario_node(
     node = partial(
         LocalizerNode, scenario.tag_map, config, frame_truth=source.frame_truth, premap=premap
     )
-    return WiredNode(config, node, source, f"scenario:{name}")
+    return WiredNode(config, node, source, f"scenario:{name}", None, scenario.tag_map, premap)
 
 
 def _bag_node(
@@ -300,4 +320,4 @@ def _bag_node(
     _check_premap(premap, tag_map, config)
     node = partial(LocalizerNode, tag_map, config, camera=camera, T_base_cam=T_base_cam,
                    topics=roles, premap=premap)  # fmt: skip
-    return WiredNode(config, node, source, bag.name, checked)
+    return WiredNode(config, node, source, bag.name, checked, tag_map, premap)

@@ -27,6 +27,7 @@ import numpy as np
 
 from tagloc._types import FloatArray
 from tagloc.camera import CameraModel
+from tagloc.eval.engine import Engine, SerialEngine
 from tagloc.eval.onsite_stats import ErrorStats, error_stats, fused_pose_at, truth_pose_at
 from tagloc.geometry import SE3
 from tagloc.localize import driver
@@ -43,9 +44,12 @@ __all__ = [
     "ErrorStats",
     "HeldOutObservation",
     "HeldOutResult",
+    "HeldOutTask",
     "error_stats",
     "fused_pose_at",
+    "held_out_pass",
     "held_out_tags",
+    "merge_held_out",
     "observations_of_tag",
 ]
 
@@ -149,6 +153,48 @@ class _Tap:
             yield topic, msg
 
 
+@dataclass(frozen=True, slots=True)
+class HeldOutTask:
+    """One localizer pass with one tag held out (picklable when ``stream`` is: an engine may run
+    it in another process). Fields as :func:`held_out_tags`'s parameters."""
+
+    stream: StreamFactory
+    tag_map: TagMap
+    tag_id: int
+    config: LocalizerConfig | None = None
+    camera: CameraModel | None = None
+    T_base_cam: SE3 | None = None
+    topics: NodeTopics = field(default_factory=NodeTopics)
+    family: str = "tag36h11"
+    noise: NoiseModel | None = None
+    max_range_m: float = 4.0
+
+
+def held_out_pass(task: HeldOutTask) -> list[HeldOutObservation] | None:
+    """Localize ``task.stream()`` against the map without ``task.tag_id``; the views of that tag
+    within ``max_range_m`` (None: the tag was never seen with the estimate initialized)."""
+    entry = task.tag_map.get(task.tag_id, task.family)
+    if entry is None:
+        raise KeyError(f"tag {task.family}:{task.tag_id} is not in the map")
+    reduced = TagMap.from_entries(
+        (e for e in task.tag_map if e.key != entry.key), frames=task.tag_map.frames
+    )
+    node = partial(
+        LocalizerNode, reduced, task.config, camera=task.camera, T_base_cam=task.T_base_cam,
+        topics=task.topics,
+    )  # fmt: skip
+    tap = _Tap(task.topics.detections, task.tag_id, task.family)
+    recorder = RunRecorder(f"held_out:{task.tag_id}")
+    done = driver.run(node, tap(task.stream()), [recorder])
+    run = recorder.run(done.node.metadata())
+    cam, X = done.node.camera, done.node.T_base_cam
+    if cam is None or X is None or not tap.seen:
+        return None
+    views = _views(run, tap.seen, cam, X, entry.T_frame_tag(), entry.size, task.tag_id, task.noise)
+    views = [v for v in views if v.range_m <= task.max_range_m]
+    return views or None
+
+
 def held_out_tags(
     stream: StreamFactory,
     tag_map: TagMap,
@@ -161,14 +207,16 @@ def held_out_tags(
     family: str = "tag36h11",
     noise: NoiseModel | None = None,
     max_range_m: float = 4.0,
-    progress: Callable[[int, int, int], None] | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    engine: Engine | None = None,
 ) -> HeldOutResult:
     """Localize ``stream()`` once per held-out tag against ``tag_map`` without it.
 
     Parameters
     ----------
     stream : callable
-        Returns the message stream afresh (it is replayed once per tag).
+        Returns the message stream afresh (it is replayed once per tag); picklable (e.g. a
+        bag's path and topics) when ``engine`` runs passes in other processes.
     tag_map : TagMap
         The surveyed map (tags in frame ``map``).
     config : LocalizerConfig, optional
@@ -184,42 +232,46 @@ def held_out_tags(
         Views farther than this (PnP range, m) are left out: beyond about 4 m one view's PnP
         error is as large as the localization error it should measure.
     progress : callable, optional
-        ``progress(index, total, tag_id)`` before each tag.
+        ``progress(done, total)`` after each pass.
+    engine : Engine, optional
+        Where the passes run (:mod:`tagloc.eval.engine`; default: in series, here).
 
     Returns
     -------
     HeldOutResult
         One observation per detection of a held-out tag at a stamp where the fused estimate is
-        initialized (with truth errors when the stream carries ground truth).
+        initialized (with truth errors when the stream carries ground truth); the same for any
+        engine.
+
+    Raises
+    ------
+    KeyError
+        If a tag of ``tag_ids`` is not in the map.
     """
     topics = topics or NodeTopics()
     ids = list(tag_ids) if tag_ids is not None else list(tag_map.ids(family))
-    result = HeldOutResult()
-    for k, tag_id in enumerate(ids):
-        if progress is not None:
-            progress(k, len(ids), tag_id)
-        entry = tag_map.get(tag_id, family)
-        if entry is None:
+    for tag_id in ids:
+        if tag_map.get(tag_id, family) is None:
             raise KeyError(f"tag {family}:{tag_id} is not in the map")
-        reduced = TagMap.from_entries(
-            (e for e in tag_map if e.key != entry.key), frames=tag_map.frames
-        )
-        node = partial(
-            LocalizerNode, reduced, config, camera=camera, T_base_cam=T_base_cam, topics=topics
-        )
-        tap = _Tap(topics.detections, tag_id, family)
-        recorder = RunRecorder(f"held_out:{tag_id}")
-        done = driver.run(node, tap(stream()), [recorder])
-        run = recorder.run(done.node.metadata())
-        cam, X = done.node.camera, done.node.T_base_cam
-        if cam is None or X is None or not tap.seen:
+    tasks = [
+        HeldOutTask(stream, tag_map, tag_id, config, camera, T_base_cam, topics, family, noise,
+                    max_range_m)
+        for tag_id in ids
+    ]
+    passes = (engine or SerialEngine()).map(held_out_pass, tasks, progress)
+    return merge_held_out(ids, passes)
+
+
+def merge_held_out(
+    tag_ids: Sequence[int], passes: Sequence[list[HeldOutObservation] | None]
+) -> HeldOutResult:
+    """The :class:`HeldOutResult` of one pass per tag (:func:`held_out_pass`), in tag order."""
+    result = HeldOutResult()
+    for tag_id, views in zip(tag_ids, passes, strict=True):
+        if views is None:
             result.unseen.append(tag_id)
-            continue
-        views = _views(run, tap.seen, cam, X, entry.T_frame_tag(), entry.size, tag_id, noise)
-        views = [v for v in views if v.range_m <= max_range_m]
-        if not views:
-            result.unseen.append(tag_id)
-        result.observations.extend(views)
+        else:
+            result.observations.extend(views)
     return result
 
 

@@ -8,22 +8,25 @@ the camera checks) into one JSON-ready dict; :func:`summary_lines` is its text t
 
 from __future__ import annotations
 
-import base64
-import html
-import io
 import json
 import math
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from tagloc.eval.onsite import HeldOutResult
 from tagloc.eval.onsite_checkpoints import CheckpointSpread, Stop
-from tagloc.eval.report_plots import pyplot
 from tagloc.fileutil import atomic_write_texts
+from tagloc.localize.run import LocalizationRun
 
-__all__ = ["ONSITE_FILES", "onsite_summary", "summary_lines", "write_onsite_report"]
+__all__ = [
+    "HELD_OUT_P95_M",
+    "ONSITE_FILES",
+    "clean_json",
+    "onsite_summary",
+    "onsite_verdict",
+    "summary_lines",
+    "write_onsite_report",
+]
 
 #: The files :func:`write_onsite_report` writes into its directory.
 ONSITE_FILES = ("summary.json", "summary.txt", "report.html")
@@ -35,15 +38,38 @@ def onsite_summary(
     checkpoints_from: str, extrinsic_check: dict[str, Any] | None,
     camera_check: dict[str, Any] | None, run_facts: dict[str, Any],
 ) -> dict[str, Any]:  # fmt: skip
-    """One JSON-ready dict of the on-site evaluation."""
+    """One JSON-ready dict of the on-site evaluation, with its verdict (:func:`onsite_verdict`)."""
+    passed, why = onsite_verdict(held_out, extrinsic_check)
     return {
         "name": name, "run": run_facts,
         "held_out_tags": None if held_out is None else held_out.to_dict(),
         "checkpoints": {"from": checkpoints_from, "stops": len(stops),
                         "repeatability": [s.to_dict() for s in spreads]},
         "acceptance": acceptance, "extrinsic_check": extrinsic_check,
-        "camera_check": camera_check,
+        "camera_check": camera_check, "verdict": {"passed": passed, "reason": why},
     }  # fmt: skip
+
+
+#: The verdict's bound on the held-out tags' position error p95, m.
+HELD_OUT_P95_M = 0.10
+
+
+def onsite_verdict(
+    held_out: HeldOutResult | None, extrinsic_check: dict[str, Any] | None
+) -> tuple[bool | None, str]:
+    """Pass when the held-out tags' position error p95 is within :data:`HELD_OUT_P95_M` and the
+    extrinsic check raised no warning; None (no verdict) when no held-out tag was seen."""
+    warning = (extrinsic_check or {}).get("warning")
+    if held_out is None or not held_out.observations:
+        if warning:
+            return False, str(warning)
+        return None, "no held-out tag seen: nothing to judge the map and the estimate by"
+    p95 = held_out.stats()["position_m"].p95
+    text = (f"held-out tags' position error p95 {p95 * 100:.1f} cm (target <= "
+            f"{HELD_OUT_P95_M * 100:g} cm)")  # fmt: skip
+    if warning:
+        return False, f"{text}; {warning}"
+    return bool(p95 <= HELD_OUT_P95_M), text
 
 
 def _f(value: float | None, scale: float = 1.0, digits: int = 1) -> str:
@@ -97,94 +123,38 @@ def summary_lines(summary: dict[str, Any]) -> list[str]:
         )
         if ext["warning"]:
             lines.append(f"WARNING: {ext['warning']}")
+    v = summary.get("verdict")
+    if v is not None:
+        word = {True: "PASS", False: "FAIL", None: "NO VERDICT"}[v["passed"]]
+        lines.append(f"verdict: {word}: {v['reason']}")
     return lines
 
 
-def _png(fig: Any) -> str:
-    buffer = io.BytesIO()
-    fig.tight_layout()
-    fig.savefig(buffer, format="png")
-    pyplot().close(fig)
-    return base64.b64encode(buffer.getvalue()).decode("ascii")
-
-
-def _figures(summary: dict[str, Any], held_out: HeldOutResult | None,
-             stops: list[Stop]) -> list[tuple[str, str]]:  # fmt: skip
-    plt = pyplot()
-    out = []
-    if held_out is not None and held_out.observations:
-        fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4), dpi=100)
-        ids = held_out.tag_ids()
-        data = [[o.position_err_m * 100 for o in held_out.observations if o.tag_id == i]
-                for i in ids]  # fmt: skip
-        ax1.boxplot(data, whis=(5, 95), showfliers=False)
-        ax1.set_xticks(range(1, len(ids) + 1), [str(i) for i in ids], rotation=90)
-        ax1.set_xlabel("held-out tag")
-        ax1.set_ylabel("tag position error (cm)")
-        r = np.array([o.range_m for o in held_out.observations])
-        e = np.array([o.position_err_m * 100 for o in held_out.observations])
-        ax2.plot(r, e, ".", markersize=2, alpha=0.5)
-        ax2.set_xlabel("range (m)")
-        ax2.set_ylabel("tag position error (cm)")
-        out.append(("Held-out tags", _png(fig)))
-    acc = summary["acceptance"]
-    keys = [k for k in ("distance_m", "view_angle_deg", "laplacian_var", "brightness") if k in acc]
-    fig, axes = plt.subplots(1, len(keys), figsize=(4 * len(keys), 3.5), dpi=100, squeeze=False)
-    for ax, key in zip(axes[0], keys, strict=True):
-        bins = acc[key]
-        labels = [f"{b['lo']:g}-{b['hi']:g}" for b in bins]
-        rates = [b["rate"] if b["attempts"] else 0.0 for b in bins]
-        ax.bar(range(len(bins)), rates, color="tab:blue")
-        ax.set_xticks(range(len(bins)), labels, rotation=45, fontsize=7)
-        ax.set_ylim(0, 1)
-        ax.set_title(key, fontsize=9)
-        ax.set_ylabel("accepted fraction")
-    out.append(("Fix acceptance by conditions", _png(fig)))
-    if stops:
-        fig, ax = plt.subplots(figsize=(6, 5), dpi=100)
-        ax.plot([s.x for s in stops], [s.y for s in stops], "o", markersize=4)
-        for c in summary["checkpoints"]["repeatability"]:
-            ax.annotate(c["name"], c["mean_xy_m"], fontsize=7)
-        ax.set_aspect("equal")
-        ax.set_xlabel("x (m)")
-        ax.set_ylabel("y (m)")
-        ax.set_title("stops (fused pose)")
-        out.append(("Checkpoints", _png(fig)))
-    return out
-
-
 def write_onsite_report(
-    summary: dict[str, Any], held_out: HeldOutResult | None, stops: list[Stop], out_dir: Path
-) -> list[Path]:
+    summary: dict[str, Any], held_out: HeldOutResult | None, stops: list[Stop], out_dir: Path,
+    run: LocalizationRun | None = None,
+) -> list[Path]:  # fmt: skip
     """Write ``summary.json``, ``summary.txt`` and ``report.html`` into ``out_dir`` (all or
-    none); return their paths."""
+    none); return their paths. ``run``: the whole-map pass, for the trajectory and the ladder."""
+    from tagloc.eval.onsite_page import render_html
+
     lines = summary_lines(summary)
-    figures = "".join(
-        f"<h2>{html.escape(title)}</h2><img src='data:image/png;base64,{png}'>"
-        for title, png in _figures(summary, held_out, stops)
-    )
-    page = (
-        f"<!doctype html><html><head><meta charset='utf-8'><title>"
-        f"{html.escape(summary['name'])}</title></head><body><h1>On-site evaluation: "
-        f"{html.escape(summary['name'])}</h1><pre>{html.escape(chr(10).join(lines))}</pre>"
-        f"{figures}</body></html>\n"
-    )
     out_dir.mkdir(parents=True, exist_ok=True)
     files = {
-        out_dir / "summary.json": json.dumps(_clean(summary), indent=2, allow_nan=False) + "\n",
+        out_dir / "summary.json": json.dumps(clean_json(summary), indent=2, allow_nan=False) + "\n",
         out_dir / "summary.txt": "\n".join(lines) + "\n",
-        out_dir / "report.html": page,
+        out_dir / "report.html": render_html(summary, lines, held_out, stops, run),
     }
     atomic_write_texts(files)
     return list(files)
 
 
-def _clean(value: Any) -> Any:
+def clean_json(value: Any) -> Any:
     """NaN and infinities as null (strict JSON)."""
     if isinstance(value, float):
         return value if math.isfinite(value) else None
     if isinstance(value, dict):
-        return {k: _clean(v) for k, v in value.items()}
+        return {k: clean_json(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return [_clean(v) for v in value]
+        return [clean_json(v) for v in value]
     return value
