@@ -14,8 +14,10 @@ from functools import cache
 
 import numpy as np
 
+from tagloc.geometry import SE3
 from tagloc.messages import (
     CameraInfoMsg,
+    GroundTruthMsg,
     ImageMsg,
     Message,
     OdometryMsg,
@@ -34,7 +36,7 @@ from tagloc.sim.scenarios import (
 from tagloc.tags import TagMap
 
 #: Seconds of the drive the tests use (the default scenario: the office route).
-DURATION_S = 10.0
+DURATION_S = 30.0
 #: Every this many camera frames is kept (30 Hz -> 10 Hz, a live robot's detection rate).
 FRAME_STEP = 3
 #: The drive's clock starts here (near today's epoch, as a robot's clock), ns.
@@ -46,6 +48,8 @@ class Drive:
     """The records in arrival order, the tag map, the premap and a configuration."""
 
     records: tuple[Message, ...]
+    #: The true ``T_map_base`` at each odometry stamp (simulator ground truth).
+    truth: dict[int, SE3]
     tag_map: TagMap
     premap: np.ndarray
     config_yaml: str
@@ -66,6 +70,7 @@ def _base_drive() -> Drive:
     kept = scenario.camera_stamps_ns[::FRAME_STEP]
     images = {f.stamp_ns: f.image for f in render_frames(scenario.drive, stamps_ns=kept)}
     records: list[Message] = []
+    truth: dict[int, SE3] = {}
     for _topic, msg in source:
         if isinstance(msg, TagDetectionsMsg):
             if msg.stamp_ns in images:
@@ -74,10 +79,13 @@ def _base_drive() -> Drive:
         elif isinstance(msg, OdometryMsg):
             records.append(TransformMsg(_stamp(msg.stamp_ns), "odom", msg.child_frame_id,
                                         msg.T_parent_child))  # fmt: skip
+        elif isinstance(msg, GroundTruthMsg):
+            truth[_stamp(msg.stamp_ns)] = msg.T_frame_child
         elif isinstance(msg, (CameraInfoMsg, TransformMsg, PointCloudMsg)):
             records.append(dataclasses.replace(msg, stamp_ns=_stamp(msg.stamp_ns)))
     config = calibrated_config(scenario, scenario_config())
-    return Drive(tuple(records), scenario.tag_map, scenario_premap(scenario), config.to_yaml_text())
+    premap = scenario_premap(scenario)
+    return Drive(tuple(records), truth, scenario.tag_map, premap, config.to_yaml_text())
 
 
 @cache

@@ -40,7 +40,7 @@ def test_corrections_through_dimos_equal_the_offline_node(tmp_path: Path, odom_f
     d = drive(odom_frame)
     tags, config, premap = _files(tmp_path, odom_frame)
     expected = offline(d.tag_map, d.records, config, premap, odom_frame)
-    assert len(expected) > 50  # the drive is localized for most of its 10 s
+    assert len(expected) > 50  # localized for the second half of the drive at least
 
     module = TaglocRelocalization(tag_map=str(tags), localizer_config=str(config),
                                   map_file=str(premap), world_frame=odom_frame, tf_interval=0.0)

@@ -156,6 +156,8 @@ class TaglocRelocalization(RelocalizationModule):
         """``handler`` counting its messages, never raising into the transport's thread."""
 
         def on_message(msg: Any) -> None:
+            if name == "tf" and self._own(msg):
+                return  # our correction, looped back by the IO port
             live = self._live
             if live is None:
                 self._counts[name] += 1
@@ -174,6 +176,11 @@ class TaglocRelocalization(RelocalizationModule):
 
         return on_message
 
+    def _own(self, msg: TFMessage) -> bool:
+        """Whether ``msg`` holds nothing but the ``world -> map`` edge this module publishes."""
+        edge = (self.config.world_frame, self.config.map_frame)
+        return all((t.frame_id, t.child_frame_id) == edge for t in msg.transforms)
+
     # ----- inputs (called with the node's lock held) ---------------------------------------
     def _on_tf(self, msg: TFMessage) -> None:
         c, live = self.config, self._live
@@ -181,7 +188,7 @@ class TaglocRelocalization(RelocalizationModule):
         self._tree.receive_tfmessage(msg)
         for edge in msg.transforms:
             if edge.frame_id != c.world_frame or edge.child_frame_id == c.map_frame:
-                continue
+                continue  # not odometry (our own correction, or another relocalizer's)
             if edge.child_frame_id != c.base_frame:  # odometry of another frame: the chain
                 found = self._tree.get(c.world_frame, c.base_frame, edge.ts, CHAIN_TOLERANCE_S,
                                        warn=False)  # fmt: skip
