@@ -23,7 +23,7 @@ from tagloc.io.dimos_premap import read_pc2_lcm
 from tagloc.localize.node import LocalizerNode, NodeTopics
 from tagloc.localize.outputs import Estimate, NodeOutput
 from tagloc.messages import CameraInfoMsg, ImageMsg, Message, PointCloudMsg, TransformMsg
-from tagloc.tags import TagMap
+from tagloc.tags import load_tag_map
 
 STREAMS = {
     "tf": TFMessage, "color_image": None, "camera_info": None, "lidar": None, "tagloc_pose": None,
@@ -57,6 +57,21 @@ def to_dimos(record: Message) -> tuple[str, Any]:
     raise TypeError(type(record).__name__)
 
 
+def decoded(record: Message) -> Message:
+    """The record as the module receives it: to dimos, LCM-encoded and decoded, and back."""
+    name, msg = to_dimos(record)
+    msg = type(msg).lcm_decode(msg.lcm_encode())
+    if name == "tf":
+        (edge,) = msg.transforms
+        static = isinstance(record, TransformMsg) and record.static
+        return convert.transform_msg(edge, static=static)
+    if name == "color_image":
+        return convert.image_msg(msg)
+    if name == "camera_info":
+        return convert.camera_info_msg(msg)
+    return convert.point_cloud_msg(msg)
+
+
 def publish_all(
     module: Any, transports: dict[str, LCMTransport], records: Iterable[Message],
     timeout_s: float = 30.0,
@@ -83,12 +98,12 @@ class _Estimates:
 
 
 def offline(
-    tag_map: TagMap, records: Iterable[Message], config: Path, premap: Path, odom_frame: str
+    tags: Path, records: Iterable[Message], config: Path, premap: Path, odom_frame: str
 ) -> list[Estimate]:
-    """The offline node on the same records: its published estimates, in order."""
+    """The offline node on the same records and files: its published estimates, in order."""
     sink = _Estimates()
     cfg = live_config(config, "map", odom_frame, "base_link")
-    node = LocalizerNode(tag_map, cfg, [sink], premap=read_pc2_lcm(premap))
+    node = LocalizerNode(load_tag_map(tags), cfg, [sink], premap=read_pc2_lcm(premap))
     topics = NodeTopics()
     for record in records:
         topic = {ImageMsg: topics.image, CameraInfoMsg: topics.camera_info,

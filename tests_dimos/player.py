@@ -1,6 +1,8 @@
 """A dimos module that plays a recorded tagloc stream (a test's stand-in for a camera robot).
 
-It publishes the records of a pickle file at ``speed`` times their own pace: odometry and mounts
+It publishes the records of a pickle file (``{"camera_info": CameraInfoMsg fields as
+``(stamp_ns, frame_id, info dict)``, "records": [TransformMsg | ImageMsg, ...]}``: a camera info's
+read-only mapping does not pickle) at ``speed`` times their own pace: odometry and mounts
 on ``tf`` (the mounts again with every tenth odometry sample, as dimos's robots republish theirs),
 the images as JPEG ``CompressedImage`` on ``image`` (as the Go2 over DDS serves its camera) and
 the camera info on ``camera_info`` (again every second).
@@ -53,9 +55,10 @@ class DrivePlayer(Module):
 
     def _play(self) -> None:
         with open(self.config.records_file, "rb") as f:
-            records = pickle.load(f)
+            recording = pickle.load(f)
+        records = recording["records"]
         mounts = [r for r in records if isinstance(r, TransformMsg) and r.static]
-        info = next(r for r in records if isinstance(r, CameraInfoMsg))
+        info = CameraInfoMsg(*recording["camera_info"])
         t0, start, n_odom, last_info = None, time.monotonic(), 0, -1e9
         for r in records:
             t0 = r.stamp_ns if t0 is None else t0

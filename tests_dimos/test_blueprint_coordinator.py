@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import pickle
 import time
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -36,10 +37,12 @@ TOL_M = 0.15
 def test_the_desk_blueprint_runs_tagloc_in_a_worker_process(tmp_path: Path) -> None:
     d = drive("world")
     start = next(r.stamp_ns for r in d.records if isinstance(r, ImageMsg)) + round(SKIP_S * 1e9)
-    records = [r for r in d.records if isinstance(r, (TransformMsg, CameraInfoMsg, ImageMsg))
-               and (r.stamp_ns >= start or isinstance(r, CameraInfoMsg)
-                    or (isinstance(r, TransformMsg) and r.static))]  # fmt: skip
-    (tmp_path / "drive.pickle").write_bytes(pickle.dumps(records))
+    records = [r for r in d.records if isinstance(r, (TransformMsg, ImageMsg))
+               and (r.stamp_ns >= start or (isinstance(r, TransformMsg) and r.static))]  # fmt: skip
+    info = next(r for r in d.records if isinstance(r, CameraInfoMsg))
+    plain = {k: dict(v) if isinstance(v, Mapping) else v for k, v in info.info.items()}
+    recording = {"camera_info": (info.stamp_ns, info.frame_id, plain), "records": records}
+    (tmp_path / "drive.pickle").write_bytes(pickle.dumps(recording))
     save_tag_map(d.tag_map, tmp_path / "tags.yaml")
     (tmp_path / "localizer.yaml").write_text(d.config_yaml, encoding="utf-8")
     blueprint = autoconnect(

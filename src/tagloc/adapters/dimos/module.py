@@ -187,6 +187,8 @@ class TaglocRelocalization(RelocalizationModule):
         assert live is not None
         self._tree.receive_tfmessage(msg)
         for edge in msg.transforms:
+            if edge.frame_id == c.base_frame and edge.child_frame_id not in self._mounted:
+                self._mount(edge.child_frame_id)  # a sensor's mounting: to the node at once
             if edge.frame_id != c.world_frame or edge.child_frame_id == c.map_frame:
                 continue  # not odometry (our own correction, or another relocalizer's)
             if edge.child_frame_id != c.base_frame:  # odometry of another frame: the chain
@@ -230,20 +232,24 @@ class TaglocRelocalization(RelocalizationModule):
         if self._mount(msg.frame_id, "lidar"):
             self._live.feed(msg)
 
-    def _mount(self, frame: str, what: str) -> bool:
-        """Whether ``base_frame -> frame`` is known (fed to the node once, as a static)."""
+    def _mount(self, frame: str, what: str = "") -> bool:
+        """Whether ``base_frame -> frame`` is known (fed to the node once, as a static); a
+        ``what`` (camera, lidar) whose frame is not in the tree is a problem."""
         if frame in self._mounted:
             return True
         base = self.config.base_frame
         found = self._tree.get(base, frame, None, warn=False) if frame else None
         if found is None:
-            self._problem(what, f"{what} frames skipped: no transform {base} -> {frame or '?'} "
-                          "in the tf tree")  # fmt: skip
+            if what:
+                self._problem(what, f"{what} frames skipped: no transform {base} -> "
+                              f"{frame or '?'} in the tf tree")  # fmt: skip
             return False
         assert self._live is not None
-        self._live.feed(TransformMsg(0, base, frame, convert.se3(found), static=True))
+        stamp = convert.stamp_ns(found.ts)
+        self._live.feed(TransformMsg(stamp, base, frame, convert.se3(found), static=True))
         self._mounted.add(frame)
-        self._clear(what)
+        if what:
+            self._clear(what)
         return True
 
     # ----- outputs -----------------------------------------------------------------------
