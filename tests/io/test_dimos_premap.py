@@ -64,3 +64,13 @@ def test_bad_files_fail_with_one_line_naming_them(tmp_path: Path) -> None:
     with pytest.raises(PointCloudFileError, match=r"shape \(N, 3\)"):
         write_pc2_lcm(tmp_path / "x.pc2.lcm", np.zeros((4, 2)))
     assert not (tmp_path / "x.pc2.lcm").exists()
+
+
+def test_the_map_builder_writes_a_dimos_premap(tmp_path: Path) -> None:
+    from tagloc.io.survey_files import write_survey_outputs
+
+    points = _points()
+    path = tmp_path / "premap.pc2.lcm"
+    write_survey_outputs({tmp_path / "tags.yaml": "version: 1\n"}, (path, points, "pc2.lcm"))
+    np.testing.assert_array_equal(read_pc2_lcm(path), points.astype(np.float32))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["premap.pc2.lcm", "tags.yaml"]
