@@ -105,6 +105,7 @@ class TaglocRelocalization(RelocalizationModule):
         self._report: dict[str, object] = {}
         self._camera_size: tuple[int, int] | None = None
         self._mounted: set[str] = set()
+        self._waiting: dict[str, str] = {}  # sensor frame -> what waits for its mounting
 
     @rpc
     def start(self) -> None:
@@ -241,6 +242,7 @@ class TaglocRelocalization(RelocalizationModule):
         found = self._tree.get(base, frame, None, warn=False) if frame else None
         if found is None:
             if what:
+                self._waiting[frame] = what
                 self._problem(what, f"{what} frames skipped: no transform {base} -> "
                               f"{frame or '?'} in the tf tree")  # fmt: skip
             return False
@@ -248,8 +250,9 @@ class TaglocRelocalization(RelocalizationModule):
         stamp = convert.stamp_ns(found.ts)
         self._live.feed(TransformMsg(stamp, base, frame, convert.se3(found), static=True))
         self._mounted.add(frame)
-        if what:
-            self._clear(what)
+        waiting = self._waiting.pop(frame, None)
+        if waiting is not None:
+            self._clear(waiting)
         return True
 
     # ----- outputs -----------------------------------------------------------------------
