@@ -17,7 +17,7 @@ demo: $(STAMP)
 	MPLBACKEND=Agg $(BIN)/tagloc demo --out out
 
 lint: $(STAMP)
-	$(BIN)/ruff check src tests benchmarks
+	$(BIN)/ruff check src tests tests_dimos benchmarks
 
 typecheck: $(STAMP)
 	$(BIN)/mypy

@@ -25,12 +25,6 @@ from tagloc.localize.outputs import Estimate, NodeOutput
 from tagloc.messages import CameraInfoMsg, ImageMsg, Message, PointCloudMsg, TransformMsg
 from tagloc.tags import load_tag_map
 
-STREAMS = {
-    "tf": TFMessage, "color_image": None, "camera_info": None, "lidar": None, "tagloc_pose": None,
-    "tagloc_status": None,
-}  # fmt: skip
-
-
 def wire(module: Any, names: Iterable[str]) -> dict[str, LCMTransport]:
     """In-memory LCM transports for the module's streams ``names`` (each its own topic)."""
     transports = {}

@@ -14,8 +14,9 @@ YAML, for a camera that publishes none), ``lidar`` (``PointCloud2`` sweeps in th
 frame, used with a premap when ``lidar.enabled``). Outputs: ``tf``, ``loaded_map`` (the base's),
 ``tagloc_pose`` (``PoseWithCovarianceStamped`` of ``base_frame`` in ``map_frame``, stamped with
 the odometry sample it belongs to) and ``tagloc_status`` (a JSON ``String``: ladder level,
-stale, sigmas, the node's skips, ``floor`` (null: floors are not tracked yet) and ``problems``,
-one line per bad input; the same dict from the ``status()`` rpc).
+stale, sigmas, the node's skips, ``floor`` (null: floors are not tracked yet), ``problems``,
+one line per bad input, and ``received``, the messages handled per input, the module's own
+correction looped back on ``tf`` not counted; the same dict from the ``status()`` rpc).
 
 Clocks. dimos re-stamps every submitted transform with the wall clock (``Transform.now()``) and
 republishes it every ``tf_interval`` s, so the ``world -> map`` on ``tf`` carries the time it was
