@@ -25,6 +25,7 @@ from tagloc.localize.outputs import Estimate, NodeOutput
 from tagloc.messages import CameraInfoMsg, ImageMsg, Message, PointCloudMsg, TransformMsg
 from tagloc.tags import load_tag_map
 
+
 def wire(module: Any, names: Iterable[str]) -> dict[str, LCMTransport]:
     """In-memory LCM transports for the module's streams ``names`` (each its own topic)."""
     transports = {}
