@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-slow lint typecheck bench clean
+.PHONY: demo test test-slow test-dimos lint typecheck bench clean
 
 $(STAMP): pyproject.toml
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "error: $(PYTHON) not found (tagloc needs Python >= 3.11)"; exit 1; }
@@ -17,7 +17,7 @@ demo: $(STAMP)
 	MPLBACKEND=Agg $(BIN)/tagloc demo --out out
 
 lint: $(STAMP)
-	$(BIN)/ruff check src tests benchmarks
+	$(BIN)/ruff check src tests tests_dimos benchmarks
 
 typecheck: $(STAMP)
 	$(BIN)/mypy
@@ -41,8 +41,29 @@ test: lint typecheck $(TOOLS_STAMP)
 test-slow: $(STAMP) $(TOOLS_STAMP)
 	MPLBACKEND=Agg $(BIN)/pytest -q -n auto --dist loadscope --runslow
 
+# The dimos adapter against the real dimos (its own virtualenv, about 3.2 GB; not part of `make test`).
+# dimos brings opencv-contrib-python, which provides the same cv2 as tagloc's
+# opencv-python-headless: tagloc's other requirements are installed beside it, never the second cv2.
+DVENV  := .venv-dimos
+DBIN   := $(DVENV)/bin
+DSTAMP := $(DVENV)/.installed
+
+$(DSTAMP): pyproject.toml
+	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "error: $(PYTHON) not found (dimos needs Python 3.10-3.12)"; exit 1; }
+	@ldconfig -p | grep -q 'libusb-1.0.so.0' || apt-get install -y --no-install-recommends libusb-1.0-0 \
+		|| { apt-get update && apt-get install -y --no-install-recommends libusb-1.0-0; }
+	test -x $(DBIN)/python || $(PYTHON) -m venv $(DVENV)
+	$(DBIN)/pip install --quiet --upgrade pip
+	$(DBIN)/pip install --quiet 'dimos==0.0.15' pytest
+	$(DBIN)/pip install --quiet $$($(DBIN)/python -c "import tomllib; d = tomllib.load(open('pyproject.toml', 'rb'))['project']['dependencies']; print(' '.join(r for r in d if not r.startswith('opencv-python-headless')))")
+	$(DBIN)/pip install --quiet --no-deps -e .
+	@touch $(DSTAMP)
+
+test-dimos: $(DSTAMP)
+	MPLBACKEND=Agg $(DBIN)/pytest -q -p no:cacheprovider tests_dimos
+
 bench: $(STAMP)
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
 
 clean:
-	rm -rf $(VENV) out .pytest_cache .mypy_cache .ruff_cache
+	rm -rf $(VENV) $(DVENV) out .pytest_cache .mypy_cache .ruff_cache

@@ -37,7 +37,7 @@ def test_premap_file_gives_lidar_fixes(premap: Path, tmp_path: Path) -> None:
     ("shift", "suffix", "message"),
     [
         (500.0, ".ply", "premap does not overlap the tag map"),
-        (0.0, ".xyz", "expected a .ply or .pcd file"),
+        (0.0, ".xyz", "expected a .ply, .pcd or .pc2.lcm file"),
     ],
 )
 def test_bad_premap_is_one_line_and_writes_nothing(

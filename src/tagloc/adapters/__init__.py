@@ -2,6 +2,9 @@
 
 - :mod:`tagloc.adapters.rerun`: the live view, a sink of the node's outputs (extra ``view``).
 - :mod:`tagloc.adapters.ray`: an evaluation engine on a Ray cluster (extra ``fleet``).
+- :mod:`tagloc.adapters.dimos`: a dimos relocalization module driven by tagloc's node, and the
+  Go2 and desk blueprints (extras ``dimos``, ``dimos-go2``; its tests run with
+  ``make test-dimos``).
 
 Nothing here is imported by ``import tagloc``; a default install never needs the extras.
 """

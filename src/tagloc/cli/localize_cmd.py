@@ -93,7 +93,7 @@ def localize(
     lidar_topic: Annotated[str, typer.Option(help="Lidar sweeps (PointCloud2).")] = "/lidar/points",
     premap: Annotated[
         Path | None,
-        typer.Option(help="Point cloud map (.ply/.pcd, map frame) for the lidar fixes."),
+        typer.Option(help="Point cloud map (.ply/.pcd/.pc2.lcm, map frame) for the lidar fixes."),
     ] = None,
     no_bag: Annotated[
         bool,
@@ -238,13 +238,17 @@ def _check_frames(node: LocalizerNode, n_frames: int) -> None:
 
 
 def _read_premap(path: Path) -> np.ndarray:
-    """The premap's ``(N, 3)`` points from a PLY or PCD file (one-line errors from io)."""
+    """The premap's ``(N, 3)`` points from a PLY, PCD or dimos ``.pc2.lcm`` file (one-line
+    errors from io)."""
+    from tagloc.io.dimos_premap import PC2_LCM_SUFFIX, read_pc2_lcm
     from tagloc.io.pointcloud_files import read_pcd, read_ply
     from tagloc.localize import LocalizeError
 
+    if path.name.lower().endswith(PC2_LCM_SUFFIX):
+        return read_pc2_lcm(path)
     suffix = path.suffix.lower()
     if suffix not in (".ply", ".pcd"):
-        raise LocalizeError(f"--premap {path}: expected a .ply or .pcd file")
+        raise LocalizeError(f"--premap {path}: expected a .ply, .pcd or .pc2.lcm file")
     return read_ply(path) if suffix == ".ply" else read_pcd(path)
 
 

@@ -144,7 +144,11 @@ def map_build(
         ),
     ] = "/lidar/points",
     premap_format: Annotated[
-        str, typer.Option(help="Premap file beside --out: ply (premap.ply) or pcd (premap.pcd).")
+        str,
+        typer.Option(
+            help="Premap file beside --out: ply (premap.ply), pcd (premap.pcd) or pc2.lcm "
+            "(premap.pc2.lcm, a dimos premap)."
+        ),
     ] = "ply",
     calibrate_odometry: Annotated[
         int | None,
@@ -205,9 +209,9 @@ def map_build(
         raise MappingError("give exactly one of --bag PATH or --sim")
     if sim and anchors is not None:
         raise MappingError("--anchors is for --bag (with --sim, give --anchor ID: true poses)")
-    if premap_format not in ("ply", "pcd"):
-        raise OptionError(f"--premap-format {premap_format!r}: expected ply or pcd")
-    fmt = cast(Literal["ply", "pcd"], premap_format)
+    if premap_format not in ("ply", "pcd", "pc2.lcm"):
+        raise OptionError(f"--premap-format {premap_format!r}: expected ply, pcd or pc2.lcm")
+    fmt = cast(Literal["ply", "pcd", "pc2.lcm"], premap_format)
     premap_path, grid_yaml, grid_pgm = product_paths(out, fmt)
     products = {} if no_lidar else {"premap": premap_path, "map.yaml": grid_yaml,
                                     "map.pgm": grid_pgm}  # fmt: skip

@@ -19,6 +19,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tagloc.fileutil import atomic_path
+from tagloc.io.dimos_premap import write_pc2_lcm
 from tagloc.io.map_server import write_map_server
 from tagloc.io.pointcloud_files import write_pcd, write_ply
 from tagloc.lidar import OccupancyGrid
@@ -26,10 +27,11 @@ from tagloc.lidar import OccupancyGrid
 
 def write_survey_outputs(
     texts: Mapping[Path, str],
-    premap: tuple[Path, npt.NDArray[np.floating], Literal["ply", "pcd"]] | None = None,
+    premap: tuple[Path, npt.NDArray[np.floating], Literal["ply", "pcd", "pc2.lcm"]] | None = None,
     grid: tuple[Path, OccupancyGrid] | None = None,
 ) -> None:
-    """Write ``texts`` (UTF-8), the premap ``(path, points_map (N, 3), format)`` and the grid
+    """Write ``texts`` (UTF-8), the premap ``(path, points_map (N, 3), format)`` (``pc2.lcm``: a
+    dimos premap, :mod:`tagloc.io.dimos_premap`) and the grid
     ``(map.yaml path, grid)`` (with its ``.pgm`` beside it), all or none."""
     with contextlib.ExitStack() as stack:
         for path, text in texts.items():
@@ -37,7 +39,8 @@ def write_survey_outputs(
         if premap is not None:
             path, points, fmt = premap
             tmp = stack.enter_context(atomic_path(path))
-            (write_ply if fmt == "ply" else write_pcd)(tmp, points, "map")
+            writer = {"ply": write_ply, "pcd": write_pcd, "pc2.lcm": write_pc2_lcm}[fmt]
+            writer(tmp, points, "map")
         if grid is not None:
             yaml_path, occupancy = grid
             yaml_path = Path(yaml_path)
