@@ -14,6 +14,7 @@ from functools import cache
 
 import numpy as np
 
+from tagloc.eval.scenarios import calibrated_config, scenario_config
 from tagloc.geometry import SE3
 from tagloc.messages import (
     CameraInfoMsg,
@@ -26,7 +27,6 @@ from tagloc.messages import (
     TransformMsg,
 )
 from tagloc.sim.render import render_frames
-from tagloc.eval.scenarios import calibrated_config, scenario_config
 from tagloc.sim.scenarios import ScenarioSource, build_scenario, scenario_premap
 from tagloc.tags import TagMap
 
