@@ -158,10 +158,6 @@ def test_no_import_cycle_through_the_node() -> None:
     assert [c for c in import_cycles(import_graph(SRC)) if _in_node(c)] == []
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="SE3.to_se2 imports se2 for localize's callers; they switch to SE2.from_se3",
-)
 def test_no_import_cycle_elsewhere() -> None:
     assert [c for c in import_cycles(import_graph(SRC)) if not _in_node(c)] == []
 

@@ -87,7 +87,6 @@ def test_se3_to_se2_keeps_yaw(T: SE3) -> None:
     yaw = Rotation.from_matrix(T.rotation.as_matrix()).as_euler("ZYX")[0]
     assert abs(np.angle(np.exp(1j * (planar.theta - yaw)))) < 1e-9
     np.testing.assert_array_equal([planar.x, planar.y], T.translation[:2])
-    np.testing.assert_array_equal(T.to_se2().as_vector(), planar.as_vector())  # the old spelling
 
 
 @PROPERTY_SETTINGS

@@ -151,7 +151,8 @@ def test_planar_projection_jacobian_matches_finite_differences() -> None:
             d = np.zeros(6)
             d[i] = eps
             numeric[:, i] = (
-                T.plus(d).to_se2().minus(T.to_se2()) - T.plus(-d).to_se2().minus(T.to_se2())
+                SE2.from_se3(T.plus(d)).minus(SE2.from_se3(T))
+                - SE2.from_se3(T.plus(-d)).minus(SE2.from_se3(T))
             ) / (2 * eps)
         np.testing.assert_allclose(J, numeric, atol=1e-8)
 
@@ -273,7 +274,7 @@ def test_process_noise_one_increment_equals_the_path_integral(planar: bool) -> N
     np.testing.assert_allclose(one.M, path.M, rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(Q_one, Q_path, rtol=1e-12, atol=1e-15)
     assert d_one == pytest.approx(d_path) == pytest.approx(np.linalg.norm(t[1] - t[0]))
-    Ad = (A1.to_se2() if planar else A1).adjoint()
+    Ad = (SE2.from_se3(A1) if planar else A1).adjoint()
     angle = np.linalg.norm((A0.rotation.inverse() @ A1.rotation).log())
     var = d_one * noise.var_per_m + angle * noise.var_per_rad + 0.05 * noise.var_per_s
     np.testing.assert_allclose(Q_one, Ad @ np.diag(var) @ Ad.T, rtol=1e-10)

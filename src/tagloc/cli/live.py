@@ -15,8 +15,8 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
 
     from tagloc.adapters.rerun import RerunSink
-    from tagloc.cli.localize_cmd import WiredNode
     from tagloc.cli.status import StatusLine
+    from tagloc.cli.wired import WiredNode
     from tagloc.eval.run_report import RunReportSink
     from tagloc.localize.node import LocalizerNode
     from tagloc.localize.outputs import OutputSink

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Literal
@@ -31,6 +30,7 @@ from tagloc.cli.bag_camera import (
     TfTopicOpt,
 )
 from tagloc.cli.options import SCENARIO_HELP, duration_range, in_range, seed_range
+from tagloc.cli.wired import WiredNode
 from tagloc.fileutil import check_outputs
 
 if TYPE_CHECKING:
@@ -38,7 +38,6 @@ if TYPE_CHECKING:
 
     from tagloc.cli.bag_camera import BagCamera
     from tagloc.localize.config import LocalizerConfig
-    from tagloc.localize.driver import NodeFactory
     from tagloc.localize.node import LocalizerNode
     from tagloc.localize.outputs import OutputSink
     from tagloc.messages import Message
@@ -156,21 +155,6 @@ def localize(
     for line in lines:
         console.print(line)
     console.print(f"wrote {len(written)} files to {out}")
-
-
-@dataclass(frozen=True, slots=True)
-class WiredNode:
-    """The node to build (its configuration fixed) and the stream that feeds it."""
-
-    config: LocalizerConfig
-    node: NodeFactory
-    stream: Iterable[tuple[str, Message]]
-    name: str
-    #: What the camera check found (before any fix), for summary.json.
-    camera_check: dict[str, object] | None = None
-    #: The map and premap the node localizes against (for the view).
-    tag_map: TagMap | None = None
-    premap: np.ndarray | None = None
 
 
 def live_order(config: LocalizerConfig, live: bool) -> LocalizerConfig:

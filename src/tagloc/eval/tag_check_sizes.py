@@ -7,14 +7,29 @@ ratio of the sizes; a second mapped tag in view (and the map) says where it real
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from collections.abc import Sequence
+from typing import Any, Protocol
 
 import numpy as np
 
 from tagloc.geometry import SE3
 
-if TYPE_CHECKING:
-    from tagloc.eval.tag_check import TagCheck
+
+class _CheckedTag(Protocol):
+    """What the size check reads of a :class:`~tagloc.eval.tag_check.TagCheck`."""
+
+    @property
+    def accepted(self) -> Any: ...
+    @property
+    def estimate(self) -> Any: ...
+    @property
+    def in_map(self) -> bool: ...
+    @property
+    def detection(self) -> Any: ...
+    @property
+    def size_m(self) -> float | None: ...
+    @property
+    def notes(self) -> list[str]: ...
 
 __all__ = ["SIZE_TOLERANCE", "size_notes", "size_ratios"]
 
@@ -44,7 +59,7 @@ def size_ratios(
     return out
 
 
-def size_notes(tags: list[TagCheck], tag_poses: dict[int, SE3]) -> list[str]:
+def size_notes(tags: Sequence[_CheckedTag], tag_poses: dict[int, SE3]) -> list[str]:
     """Step 6: name tags whose size disagrees with the consensus of the others."""
     poses = {}
     for tag in tags:

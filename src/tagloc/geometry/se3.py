@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, ClassVar, Literal, overload
+from typing import ClassVar, Literal, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -22,9 +22,6 @@ from tagloc.geometry import _so3math as so3m
 from tagloc.geometry import jacobians as jac
 from tagloc.geometry._lie import Index, LieGroup
 from tagloc.geometry.so3 import SO3
-
-if TYPE_CHECKING:
-    from tagloc.geometry.se2 import SE2
 
 
 def _matvec(matrix: FloatArray, vector: FloatArray) -> FloatArray:
@@ -168,17 +165,6 @@ class SE3(LieGroup):
     def as_quat(self) -> FloatArray:
         """Rotation as unit quaternions ``[x, y, z, w]`` with ``w >= 0``, ``(4,)`` or ``(N, 4)``."""
         return self.rotation.as_quat()
-
-    def to_se2(self) -> SE2:
-        """Planar projection ``(x, y, yaw)``, ``yaw = atan2(R[1, 0], R[0, 0])``.
-
-        Drops z, roll and pitch (yaw as in a ZYX Euler decomposition). The same as
-        :meth:`SE2.from_se3`, which new code uses: this method makes ``se3`` import ``se2``
-        (a cycle, as ``se2`` imports ``se3``) and goes once its last callers use that.
-        """
-        from tagloc.geometry.se2 import SE2
-
-        return SE2.from_se3(self)
 
     # ----- action ----------------------------------------------------------------------------
     @overload

@@ -72,7 +72,7 @@ class Candidate:
         odometry's."""
         if planar:
             z, R = fix.to_planar()
-            return cls(fix, odom, odom.to_se2(), z, R)
+            return cls(fix, odom, SE2.from_se3(odom), z, R)
         return cls(fix, odom, odom, fix.T_map_base, np.asarray(fix.cov))
 
     @classmethod
@@ -82,7 +82,7 @@ class Candidate:
         basis may then have no column)."""
         if planar:
             basis, R = planar_constraint(fix.basis, fix.cov)
-            return cls(fix, odom, odom.to_se2(), fix.T_map_base.to_se2(), R, basis)
+            return cls(fix, odom, SE2.from_se3(odom), SE2.from_se3(fix.T_map_base), R, basis)
         return cls(fix, odom, odom, fix.T_map_base, fix.cov, fix.basis)
 
     @property

@@ -175,7 +175,7 @@ class MapOdomEstimator:
         A = self.path.lookup(stamp_ns)
         if self.planar:
             J = planar_projection_jacobian(T_map_odom)
-            self.reset(stamp_ns, A, T_map_odom.to_se2(), J @ cov6 @ J.T)
+            self.reset(stamp_ns, A, SE2.from_se3(T_map_odom), J @ cov6 @ J.T)
         else:
             self.reset(stamp_ns, A, T_map_odom, cov6)
 

@@ -129,7 +129,7 @@ class TagFix:
         ``J cov J^T`` in the SE(2) right tangent ``[x, y, theta]`` (z, roll, pitch dropped;
         ``J`` from :func:`planar_projection_jacobian`)."""
         J = planar_projection_jacobian(self.T_map_base)
-        return self.T_map_base.to_se2(), J @ self.cov @ J.T
+        return SE2.from_se3(self.T_map_base), J @ self.cov @ J.T
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -193,7 +193,7 @@ class PartialFix:
 
 def planar_projection_jacobian(T: SE3) -> FloatArray:
     """``J (3, 6)``: right perturbation ``[x, y, z, rx, ry, rz]`` of ``T`` to the right perturbation
-    ``[x, y, theta]`` of ``T.to_se2()`` (yaw ``psi = atan2(R10, R00)``).
+    ``[x, y, theta]`` of ``SE2.from_se3(T)`` (yaw ``psi = atan2(R10, R00)``).
 
     ``T @ Exp(xi)`` moves the position by ``R rho``, i.e. by ``Rz(psi)^T (R rho)[:2]`` in the
     planar body frame; it moves the first column of ``R`` by ``R (phi x e_x)``, hence

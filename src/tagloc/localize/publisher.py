@@ -142,7 +142,7 @@ class CorrectionPublisher:
     ) -> Pose | None:  # fmt: skip
         """``target`` moved back to within the cap of ``ref``, both seen at the robot's pose
         ``odom``, or None if it is within already (the remainder is reported, and carried)."""
-        A = odom.to_se2() if self._planar else odom
+        A = SE2.from_se3(odom) if self._planar else odom
         X_A = target @ A  # type: ignore[operator]
         jump = (ref @ A).inverse() @ X_A  # type: ignore[operator]
         step, clipped = (cap or self._cap).clip(jump)
