@@ -29,6 +29,7 @@ from tagloc.sim.scenarios import (
     scenario_premap,
 )
 from tagloc.tags.covariance import NoiseModel
+from tagloc.units import S_NS
 
 __all__ = [
     "calibrated_config",
@@ -38,7 +39,6 @@ __all__ = [
     "scenario_metadata",
 ]
 
-S_NS = 1_000_000_000
 
 
 def run_scenario(

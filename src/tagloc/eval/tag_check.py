@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.camera import CameraModel, check_image
 from tagloc.errors import CameraModelError
 from tagloc.geometry import SE3
@@ -51,8 +52,6 @@ from tagloc.tags import (
     resolve_ambiguity,
 )
 from tagloc.tags.observation import ObservationResult
-
-FloatArray = npt.NDArray[np.float64]
 
 __all__ = ["FrameCheck", "GateResult", "TagCheck", "check_frame"]
 

@@ -29,11 +29,10 @@ from __future__ import annotations
 from typing import Literal
 
 import numpy as np
-import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.config import StrictModel
 
-FloatArray = npt.NDArray[np.float64]
 Axis = Literal["+x", "-x", "+y", "-y", "+z", "-z"]
 
 

@@ -6,13 +6,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from tagloc._types import FloatArray
 from tagloc.geometry import (
     se2_right_jacobian,
     se2_right_jacobian_inv,
     se3_right_jacobian,
     se3_right_jacobian_inv,
 )
-from tagloc.localize.fix import FloatArray
 
 __all__ = ["jr", "jr_inv"]
 

@@ -14,8 +14,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tagloc._types import FloatArray
 from tagloc.geometry import SE2, SE3
-from tagloc.localize.fix import FloatArray, PartialFix, TagFix
+from tagloc.localize.fix import PartialFix, TagFix
 from tagloc.localize.projected_update import planar_constraint
 
 __all__ = ["Candidate", "Pose", "mahalanobis_sq", "pair_d2"]

@@ -25,10 +25,10 @@ from tagloc.localize.fix import TagFix
 from tagloc.localize.held import HeldRecords, Record
 from tagloc.localize.sources import FixSource, SourceResult
 from tagloc.supervise import Supervisor
+from tagloc.units import S_NS
 
 __all__ = ["FixDecisions"]
 
-S_NS = 1_000_000_000
 
 
 class FixDecisions:

@@ -15,10 +15,10 @@ from tagloc.geometry import SE3
 from tagloc.localize.config import LocalizerConfig
 from tagloc.localize.fusion import Fusion
 from tagloc.localize.outputs import Estimate
+from tagloc.units import S_NS
 
 __all__ = ["EstimateOutput"]
 
-S_NS = 1_000_000_000
 
 
 class EstimateOutput:

@@ -24,13 +24,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from tagloc._types import FloatArray
 from tagloc.frames import TransformBuffer
 from tagloc.geometry import SE2, SE3
 from tagloc.localize.candidate import Candidate, Pose
 from tagloc.localize.config import CalibrationConfig, FilterConfig, ProcessNoiseConfig
 from tagloc.localize.config_tags import FramesConfig
 from tagloc.localize.fix import (
-    FloatArray,
     LocalizeError,
     PoseWithCovariance,
     check_covariance,

@@ -28,14 +28,14 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.geometry import SE3
 from tagloc.localize.outputs import Estimate, NodeOutput
 from tagloc.localize.run import FixAttempt, LocalizationRun
+from tagloc.units import S_NS
 
 __all__ = ["ExtrinsicCheck", "ExtrinsicRecorder", "check_extrinsics", "check_run_extrinsics"]
 
-FloatArray = npt.NDArray[np.float64]
-S_NS = 1_000_000_000
 _AXES = ("x", "y", "z", "rx", "ry", "rz")
 
 

@@ -38,9 +38,10 @@ from typing import Literal
 
 import numpy as np
 
+from tagloc._types import FloatArray
 from tagloc.camera import CameraModel
 from tagloc.geometry import SE3
-from tagloc.localize.fix import FixQuality, FloatArray, TagFix
+from tagloc.localize.fix import FixQuality, TagFix
 from tagloc.tags import (
     GateConfig,
     NoiseModel,

@@ -15,6 +15,7 @@ delegates (:attr:`MapOdomFilter.estimator`, :attr:`MapOdomFilter.policy`).
 
 from __future__ import annotations
 
+from tagloc._types import FloatArray
 from tagloc.frames import TransformBuffer
 from tagloc.geometry import SE3
 from tagloc.localize.config import LocalizerConfig
@@ -22,7 +23,6 @@ from tagloc.localize.estimator import MapOdomEstimator
 from tagloc.localize.events import EventKind, FilterEvent
 from tagloc.localize.fix import (
     CorrectionUpdate,
-    FloatArray,
     LocalizeError,
     PartialFix,
     PoseWithCovariance,

@@ -15,10 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.errors import TaglocError
 from tagloc.geometry import SE2, SE3
-
-FloatArray = npt.NDArray[np.float64]
 
 #: Largest accepted ``max |C - C^T|`` relative to ``max |C|`` for a covariance handed in.
 SYMMETRY_TOL = 1e-9

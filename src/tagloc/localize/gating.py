@@ -27,10 +27,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import chi2
 
+from tagloc._types import FloatArray
 from tagloc.geometry import SE2, SE3, SO3
 from tagloc.localize.candidate import Candidate, Pose, mahalanobis_sq, pair_d2
 from tagloc.localize.events import EventKind
-from tagloc.localize.fix import FixQuality, FloatArray
+from tagloc.localize.fix import FixQuality
 
 __all__ = [
     "Candidate", "ConsistencyBuffer", "CorrectionCap", "PairNoise", "Pose", "QualityLimits",

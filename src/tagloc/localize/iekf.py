@@ -41,11 +41,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tagloc._types import FloatArray
 from tagloc.geometry import SE2
 from tagloc.localize._series import jr as _jr
 from tagloc.localize._series import jr_inv as _jr_inv
 from tagloc.localize.candidate import Candidate, Pose
-from tagloc.localize.fix import FloatArray
 from tagloc.localize.motion import CalibrationModel, PathMotion
 from tagloc.localize.projected_update import project_step, projector
 

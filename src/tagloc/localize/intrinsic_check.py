@@ -25,8 +25,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
-import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.camera import CameraModel, from_camera_info
 from tagloc.errors import TaglocError
 from tagloc.geometry import SE3
@@ -40,8 +40,6 @@ from tagloc.messages import (
 )
 from tagloc.tags import TagEntry, TagMap
 from tagloc.tags.pnp import estimate_tag_poses
-
-FloatArray = npt.NDArray[np.float64]
 
 __all__ = ["CameraCheck", "check_camera"]
 

@@ -31,11 +31,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
+from tagloc.units import S_NS
+
 if TYPE_CHECKING:
     from tagloc.localize.config import CalibrationConfig, ProcessNoiseConfig
 
-FloatArray = npt.NDArray[np.float64]
-S_NS = 1_000_000_000
 #: Calibration parameters, in order.
 CALIBRATION_PARAMETERS = ("scale", "lateral", "yaw_per_m", "yaw_scale")
 N_CALIBRATION = len(CALIBRATION_PARAMETERS)

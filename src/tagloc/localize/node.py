@@ -70,11 +70,11 @@ from tagloc.messages import (
 )
 from tagloc.supervise import EstimatorState, Supervisor
 from tagloc.tags import TagDetection, TagDetector, TagMap
+from tagloc.units import S_NS
 
 __all__ = ["FrameTruth", "LocalizerNode", "NodeTopics"]
 
 logger = logging.getLogger(__name__)
-S_NS = 1_000_000_000
 
 
 class LocalizerNode:

@@ -27,11 +27,11 @@ import math
 
 import numpy as np
 
+from tagloc._types import FloatArray
 from tagloc.errors import TransformLookupError
 from tagloc.frames import TransformBuffer
 from tagloc.geometry import SE3
 from tagloc.localize.candidate import Candidate
-from tagloc.localize.fix import FloatArray
 from tagloc.localize.motion import N_CALIBRATION, CalibrationModel, PathMotion, ProcessNoise
 
 __all__ = ["OdometryPath"]

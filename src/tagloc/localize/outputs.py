@@ -27,10 +27,10 @@ from typing import Any, Protocol, TypeAlias
 
 import numpy as np
 
+from tagloc._types import FloatArray
 from tagloc.frames import TransformBuffer
 from tagloc.geometry import SE3
 from tagloc.localize.events import FilterEvent
-from tagloc.localize.fix import FloatArray
 from tagloc.localize.run import CameraFrameRecord, FixAttempt, LocalizationRun
 from tagloc.messages import GroundTruthMsg
 from tagloc.supervise import LadderTransition, StatusReport

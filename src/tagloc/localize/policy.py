@@ -28,6 +28,7 @@ import math
 
 import numpy as np
 
+from tagloc._types import FloatArray
 from tagloc.errors import TransformLookupError
 from tagloc.geometry import SE3
 from tagloc.localize.candidate import Candidate
@@ -35,14 +36,14 @@ from tagloc.localize.config import CapConfig, FilterConfig, KidnapConfig, Suspec
 from tagloc.localize.config_tags import GatesConfig
 from tagloc.localize.estimator import MapOdomEstimator
 from tagloc.localize.events import EventKind, EventLog, FilterEvent
-from tagloc.localize.fix import FloatArray, PartialFix, TagFix
+from tagloc.localize.fix import PartialFix, TagFix
 from tagloc.localize.gating import ConsistencyBuffer, CorrectionCap, QualityLimits, chi2_threshold
 from tagloc.localize.publisher import CorrectionPublisher
 from tagloc.localize.recovery import GapRule, KidnapRule, RecoveryBooks, SuspectRule
+from tagloc.units import S_NS
 
 __all__ = ["FixPolicy"]
 
-S_NS = 1_000_000_000
 
 
 class FixPolicy:

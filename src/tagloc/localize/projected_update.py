@@ -32,8 +32,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from tagloc._types import FloatArray
 from tagloc.geometry import SE2, SE3
-from tagloc.localize.fix import FloatArray
 
 __all__ = ["planar_constraint", "project_step", "projector"]
 

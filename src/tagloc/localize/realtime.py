@@ -47,11 +47,11 @@ from tagloc.localize.realtime_worker import (
 )
 from tagloc.messages import ImageMsg, Message, TagDetectionsMsg
 from tagloc.tags import TagDetector, make_detector
+from tagloc.units import S_NS
 
 __all__ = ["RealtimeStats", "run_wall"]
 
 logger = logging.getLogger(__name__)
-S_NS = 1_000_000_000
 #: Frames awaiting their correction at most (more go unmeasured).
 _MAX_WAITING_FRAMES = 4096
 

@@ -23,10 +23,10 @@ import numpy as np
 from tagloc.localize.candidate import Candidate, Pose, pair_d2
 from tagloc.localize.config import KidnapConfig, SuspectConfig
 from tagloc.localize.gating import ConsistencyBuffer, CorrectionCap, PairNoise, SourceMonitor
+from tagloc.units import S_NS
 
 __all__ = ["GapRule", "KidnapRule", "RecoveryBooks", "SuspectRule"]
 
-S_NS = 1_000_000_000
 
 
 @dataclass(frozen=True, slots=True)

@@ -26,13 +26,13 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.geometry import SE3
 from tagloc.localize.events import APPLIED, FilterEvent
 from tagloc.supervise import LadderTransition
 
 __all__ = ["CameraFrameRecord", "FixAttempt", "LocalizationRun"]
 
-FloatArray = npt.NDArray[np.float64]
 
 
 @dataclass(frozen=True, slots=True, eq=False)

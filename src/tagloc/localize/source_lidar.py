@@ -50,6 +50,7 @@ from tagloc.localize.sources import (
 from tagloc.messages import Message, PointCloudMsg
 from tagloc.supervise import FixSourceSpec
 from tagloc.tags import TagDetection, TagMap
+from tagloc.units import S_NS
 
 __all__ = [
     "LIDAR",
@@ -61,7 +62,6 @@ __all__ = [
 ]
 
 LIDAR = "lidar"
-S_NS = 1_000_000_000
 #: Sweeps that may wait for odometry to cover them (10 s at 10 Hz); older ones are dropped.
 _MAX_WAITING = 100
 #: Variance written for the unmeasured directions of a lidar fix in its run record (m^2, rad^2).

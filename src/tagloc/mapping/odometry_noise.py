@@ -22,14 +22,13 @@ handheld VIO rig by 2.5 deg.
 from __future__ import annotations
 
 import numpy as np
-import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.geometry import SO3, inverse_h
 from tagloc.mapping.config import OdometryNoise
 from tagloc.mapping.initialize import rotation_angle
 from tagloc.mapping.whitening import AxisWhitening
 
-FloatArray = npt.NDArray[np.float64]
 _Z = np.array([0.0, 0.0, 1.0])
 
 

@@ -12,11 +12,9 @@ from dataclasses import dataclass
 
 import gtsam
 import numpy as np
-import numpy.typing as npt
 
+from tagloc._types import FloatArray
 from tagloc.mapping.gtsam_bridge import PERM, diagonal_sigmas
-
-FloatArray = npt.NDArray[np.float64]
 
 
 @dataclass(frozen=True, slots=True, eq=False)

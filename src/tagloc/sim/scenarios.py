@@ -63,6 +63,7 @@ from tagloc.sim.people import Person, crowd_around
 from tagloc.sim.trajectory import Trajectory
 from tagloc.sim.world import WallMount, World, load_builtin_world, load_default_world
 from tagloc.tags.tagmap import TagEntry, TagMap
+from tagloc.units import S_NS
 
 __all__ = [
     "SCENARIOS",
@@ -76,7 +77,6 @@ __all__ = [
     "truncate_drive",
 ]
 
-S_NS = 1_000_000_000
 MAP_FRAME, ODOM_FRAME, BASE_FRAME, CAMERA_FRAME = "map", "odom", "base_link", "camera_optical"
 TF_STATIC = "/tf_static"
 #: Odometry covariance written with the simulated odometry (informational; the filter's process
