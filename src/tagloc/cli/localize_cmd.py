@@ -199,14 +199,15 @@ def _check_frames(node: LocalizerNode, n_frames: int) -> None:
 
 
 def _read_premap(path: Path) -> np.ndarray:
-    """The premap's ``(N, 3)`` points from a PLY or PCD file (one-line errors from io)."""
-    from tagloc.io.pointcloud_files import read_pcd, read_ply
+    """The premap's ``(N, 3)`` points from a PLY or PCD file (one-line errors from io; a large
+    premap is voxel-downsampled on reading, :func:`~tagloc.io.pointcloud_files.read_premap`)."""
+    from tagloc.io.pointcloud_files import read_premap
     from tagloc.localize import LocalizeError
 
     suffix = path.suffix.lower()
     if suffix not in (".ply", ".pcd"):
         raise LocalizeError(f"--premap {path}: expected a .ply or .pcd file")
-    return read_ply(path) if suffix == ".ply" else read_pcd(path)
+    return read_premap(path)
 
 
 def _scenario_node(
