@@ -89,8 +89,8 @@ def parse_exclusion(text: str) -> Exclusion:
     kind, _, rest = text.partition(":")
     try:
         if kind == "tag":
-            tag, _, window = rest.partition("@")
-            t0, t1 = _range(window) if window else (None, None)
+            tag, at, window = rest.partition("@")
+            t0, t1 = _range(window) if at else (None, None)  # "tag:5@" is no window: an error
             tag_id: int | None = int(tag)
         elif kind == "time":
             tag_id, (t0, t1) = None, _range(rest)
