@@ -164,8 +164,10 @@ def test_a_read_only_directory_is_refused_before_the_survey(site: Path) -> None:
 
 @pytest.mark.parametrize(
     ("signum", "code"),
-    [(signal.SIGTERM, 128 + signal.SIGTERM),
-     pytest.param(signal.SIGINT, 130, marks=pytest.mark.slow)],  # fmt: skip
+    [
+        (signal.SIGTERM, 128 + signal.SIGTERM),
+        pytest.param(signal.SIGINT, 130, marks=pytest.mark.slow),
+    ],
 )
 def test_a_terminated_run_leaves_nothing_it_created(
     site: Path, signum: signal.Signals, code: int

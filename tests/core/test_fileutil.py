@@ -148,10 +148,9 @@ def test_a_failed_command_removes_the_outputs_it_created(
     (tmp_path / "old").mkdir()
     (tmp_path / "old" / "keep.txt").write_text("kept\n")
     with pytest.raises(type(failure)), removing_created_outputs():
-        check_outputs(
-            {"--out": tmp_path / "new" / "run", "--into": tmp_path / "old", "--csv": tmp_path / "a" / "b.csv"},
-            directories={"--out": ["x.txt"], "--into": ["y.txt"]},
-        )  # fmt: skip
+        outputs = {"--out": tmp_path / "new" / "run", "--into": tmp_path / "old"}
+        outputs["--csv"] = tmp_path / "a" / "b.csv"
+        check_outputs(outputs, directories={"--out": ["x.txt"], "--into": ["y.txt"]})
         (tmp_path / "new" / "run").mkdir(parents=True)
         (tmp_path / "new" / "run" / "x.txt").write_text("partial")
         atomic_write_text(tmp_path / "old" / "y.txt", "new file in an existing directory")

@@ -187,8 +187,8 @@ def test_size_claims_and_time_extremes_are_skipped(tmp_path: Path) -> None:
         base = cloud(rng, 2 * S, n=5)
         t = np.zeros(5)
         t[-1] = top
-        msgs.append(relayout(base, [("x", "f4", base.points[:, 0]), ("y", "f4", base.points[:, 1]),
-                                    ("z", "f4", base.points[:, 2]), ("t", kind, t)], False))  # fmt: skip
+        xyz = [(axis, "f4", base.points[:, k]) for k, axis in enumerate("xyz")]
+        msgs.append(relayout(base, [*xyz, ("t", kind, t)], False))
     far = cloud(rng, 3 * S, n=6)
     points = far.points.copy()
     points[1] = (2 * MAX_POINT_RANGE_M, 0.0, 0.0)
@@ -199,7 +199,8 @@ def test_size_claims_and_time_extremes_are_skipped(tmp_path: Path) -> None:
     back = [m for _, m in source]
     assert source.skipped == {"bad_point_cloud": 3}  # the huge one, float32 and float64 max
     assert len(back) == 2 and isinstance(back[0], PointCloudMsg)
-    assert back[0].time_offset_s is not None and back[0].time_offset_s.max() == pytest.approx(4.294967295)
+    assert back[0].time_offset_s is not None
+    assert back[0].time_offset_s.max() == pytest.approx(4.294967295)
     assert isinstance(back[1], PointCloudMsg)
     assert np.isnan(back[1].points[1:3]).all() and np.isfinite(back[1].points[[0, 4, 5]]).all()
 

@@ -169,7 +169,7 @@ def test_point_cap_and_non_finite_points(tmp_path: Path, points: np.ndarray) -> 
     for bad in (np.nan, np.inf, 2 * MAX_COORDINATE_M):
         points[500, 1] = bad
         write_pcd(tmp_path / "b.pcd", points)
-        with pytest.raises(PointCloudFileError, match="point 500 .*finite and within"):
+        with pytest.raises(PointCloudFileError, match=r"point 500 .*finite and within"):
             read_pcd(tmp_path / "b.pcd")
 
 
@@ -195,5 +195,5 @@ def test_a_premap_above_the_cap_is_voxel_downsampled(
     monkeypatch.setattr(files, "MAX_PREMAP_POINTS", 100_000)
     with pytest.raises(PointCloudFileError, match="160000 points, more than the 100000"):
         read_premap(tmp_path / "big.pcd")
-    with pytest.raises(PointCloudFileError, match="expected a .ply or .pcd"):
+    with pytest.raises(PointCloudFileError, match=r"expected a \.ply or \.pcd"):
         read_premap(tmp_path / "big.xyz")

@@ -60,9 +60,9 @@ class CheckpointsFile(StrictModel):
         first: dict[str, int] = {}
         for k, spec in enumerate(self.checkpoints):
             if spec.name in first:  # their visits would be merged into one spread
+                where = f"first at checkpoints[{first[spec.name]}]"
                 raise FieldPathError(
-                    ("checkpoints", k, "name"),
-                    f"duplicate name {short_repr(spec.name)} (first at checkpoints[{first[spec.name]}])",
+                    ("checkpoints", k, "name"), f"duplicate name {short_repr(spec.name)} ({where})"
                 )
             first[spec.name] = k
         return self
