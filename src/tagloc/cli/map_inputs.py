@@ -118,12 +118,13 @@ def build_config(
     path: Path | None, base: MapBuildConfig, update: dict[str, object]
 ) -> MapBuildConfig:
     """``base`` updated by the ``--config`` YAML (MapBuildConfig fields), then by options."""
-    from tagloc.config import parse_yaml_mapping, validate
+    from tagloc.config import parse_yaml_mapping, read_text_file, validate
     from tagloc.mapping import MapBuildConfig
 
     data = base.model_dump()
     if path is not None:
-        data = _merged(data, parse_yaml_mapping(_read_text(path, "build configuration"), str(path)))
+        text = read_text_file(path, "build configuration")  # bounded, UTF-8
+        data = _merged(data, parse_yaml_mapping(text, str(path)))
     data = _merged(data, update)
     return validate(MapBuildConfig, data, str(path) if path is not None else "options")
 

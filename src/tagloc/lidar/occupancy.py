@@ -26,9 +26,9 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, model_validator
 
-from tagloc.config import StrictModel
+from tagloc.config import FieldPathError, StrictModel
 from tagloc.geometry import SE3
 from tagloc.lidar.cloud import finite_points, voxel_downsample
 
@@ -46,22 +46,30 @@ def _logit(p: float) -> float:
 class OccupancyConfig(StrictModel):
     """How :func:`build_occupancy` rasterises scans."""
 
-    resolution_m: float = Field(0.05, gt=0.0)
+    resolution_m: float = Field(0.05, ge=0.005, le=10.0)
     """Cell edge (m)."""
-    z_min_m: float = 0.1
+    z_min_m: float = Field(0.1, ge=-1e3, le=1e3)
     """Lowest point height (m, ``map`` z; the floor is z = 0) that counts as an obstacle."""
-    z_max_m: float = 2.0
+    z_max_m: float = Field(2.0, ge=-1e3, le=1e3)
     """Highest point height (m) that counts (above: ceilings, lamps)."""
-    max_range_m: float = Field(30.0, gt=0.0)
+    max_range_m: float = Field(30.0, gt=0.0, le=1e4)
     """Points farther (horizontally) than this from the sensor are dropped."""
-    log_odds_hit: float = Field(_logit(0.6), gt=0.0)
-    log_odds_miss: float = Field(_logit(0.4), lt=0.0)
-    clamp_min: float = Field(_logit(0.12), lt=0.0)
-    clamp_max: float = Field(_logit(0.97), gt=0.0)
+    log_odds_hit: float = Field(_logit(0.6), gt=0.0, le=50.0)
+    log_odds_miss: float = Field(_logit(0.4), lt=0.0, ge=-50.0)
+    clamp_min: float = Field(_logit(0.12), lt=0.0, ge=-100.0)
+    clamp_max: float = Field(_logit(0.97), gt=0.0, le=100.0)
     occupied_thresh: float = Field(0.65, gt=0.0, lt=1.0)
     free_thresh: float = Field(0.196, gt=0.0, lt=1.0)
-    padding_m: float = Field(0.5, ge=0.0)
+    padding_m: float = Field(0.5, ge=0.0, le=1e3)
     """Margin (m) around the rays' extent."""
+
+    @model_validator(mode="after")
+    def _ordered(self) -> OccupancyConfig:
+        if not self.z_min_m < self.z_max_m:
+            raise FieldPathError(("z_min_m",), "must be below z_max_m")
+        if not self.free_thresh < self.occupied_thresh:
+            raise FieldPathError(("free_thresh",), "must be below occupied_thresh")
+        return self
 
 
 @dataclass(frozen=True, slots=True, eq=False)

@@ -78,14 +78,14 @@ class NoiseModel(BaseModel):
         Add the ``phi x rho`` term (step 3 of the module docstring); default True.
     """
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
-    sigma_px: float = Field(0.5, gt=0.0)
-    view_angle_gain: float = Field(0.05, ge=0.0)
-    corner_bias_px: float = Field(0.1, ge=0.0)
-    scale_rel: float = Field(0.002, ge=0.0)
-    floor_translation_m: float = Field(0.0003, ge=0.0)
-    floor_rotation_rad: float = Field(0.0005, ge=0.0)
+    sigma_px: float = Field(0.5, ge=1e-3, le=100.0)
+    view_angle_gain: float = Field(0.05, ge=0.0, le=100.0)
+    corner_bias_px: float = Field(0.1, ge=0.0, le=100.0)
+    scale_rel: float = Field(0.002, ge=0.0, le=1.0)
+    floor_translation_m: float = Field(0.0003, ge=0.0, le=100.0)
+    floor_rotation_rad: float = Field(0.0005, ge=0.0, le=3.2)
     second_order: bool = True
 
 
