@@ -60,35 +60,36 @@ def test_huge_windows_and_distances_are_refused_not_overflowed() -> None:
 
 
 @pytest.mark.parametrize(
-    ("text", "expected"),
+    ("text", "field", "words"),
     [
-        ("tags:\n  noise:\n    sigma_px: .inf\n", "tags.noise.sigma_px: input should be a finite"),
-        ("tags:\n  noise:\n    sigma_px: 1.0e-300\n", "tags.noise.sigma_px: input should be greater"),
-        ("tags:\n  noise:\n    floor_translation_m: .inf\n", "floor_translation_m: input should be a finite"),
-        ("tags:\n  noise:\n    view_angle_gain: 1.0e300\n", "view_angle_gain: input should be less"),
-        ("tags:\n  family: tag99h99\n", "tags.family: unknown tag family 'tag99h99'"),
-        ("gates:\n  max_hamming: 1000000000\n", "gates.max_hamming: input should be less"),
-        ("gates:\n  prior_gate_chi2: .inf\n", "gates.prior_gate_chi2: input should be a finite"),
-        ("kidnap:\n  n_fixes: 3\n  min_sources: 5\n", "kidnap.min_sources: must be at most n_fixes"),
-        ("supervisor:\n  camera:\n    timeout_s: 0.01\n", "supervisor.camera.timeout_s: must be above the period"),
-        ("supervisor:\n  ladder:\n    enter_nis: 1.0e300\n", "supervisor.ladder.enter_nis: input should be less"),
-        ("lidar:\n  fix:\n    min_range_m: 50\n", "lidar.fix.min_range_m: must be below max_range_m"),
-        ("lidar:\n  fix:\n    registration:\n      num_threads: 100000\n", "num_threads: input should be less than or equal to 64"),
-        ("lidar:\n  fix:\n    registration:\n      max_iterations: 1000000000\n", "max_iterations: input should be less"),
-        ("lidar:\n  fix:\n    registration:\n      num_neighbors: 1000000000\n", "num_neighbors: input should be less"),
-        ("lidar:\n  fix:\n    registration:\n      voxel_m: 1.0e-9\n", "voxel_m: input should be greater"),
-        ("lidar:\n  fix:\n    covariance_inflation: 1.0e300\n", "covariance_inflation: input should be less"),
+        ("tags: {noise: {sigma_px: .inf}}", "tags.noise.sigma_px", "input should be a finite"),
+        ("tags: {noise: {sigma_px: 1.0e-300}}", "tags.noise.sigma_px", "input should be greater"),
+        ("tags: {noise: {floor_translation_m: .inf}}", "floor_translation_m", "should be a finite"),
+        ("tags: {noise: {view_angle_gain: 1.0e300}}", "view_angle_gain", "input should be less"),
+        ("tags: {family: tag99h99}", "tags.family", "unknown tag family 'tag99h99'"),
+        ("gates: {max_hamming: 1000000000}", "gates.max_hamming", "input should be less"),
+        ("gates: {prior_gate_chi2: .inf}", "gates.prior_gate_chi2", "input should be a finite"),
+        ("kidnap: {n_fixes: 3, min_sources: 5}", "kidnap.min_sources", "must be at most n_fixes"),
+        ("supervisor: {camera: {timeout_s: 0.01}}", "camera.timeout_s", "must be above the period"),
+        ("supervisor: {ladder: {enter_nis: 1.0e300}}", "ladder.enter_nis", "input should be less"),
+        ("lidar: {fix: {min_range_m: 50}}", "lidar.fix.min_range_m", "must be below max_range_m"),
+        ("lidar: {fix: {registration: {num_threads: 100000}}}", "num_threads", "equal to 64"),
+        ("lidar: {fix: {registration: {max_iterations: 1.0e9}}}", "max_iterations", "input"),
+        ("lidar: {fix: {registration: {num_neighbors: 1000000000}}}", "num_neighbors", "less"),
+        ("lidar: {fix: {registration: {voxel_m: 1.0e-9}}}", "voxel_m", "should be greater"),
+        ("lidar: {fix: {covariance_inflation: 1.0e300}}", "covariance_inflation", "should be less"),
     ],
-)  # fmt: skip
+)
 def test_every_section_refuses_values_out_of_range_or_order(
-    tmp_path: Path, text: str, expected: str
+    tmp_path: Path, text: str, field: str, words: str
 ) -> None:
     """Values that native code cannot take (threads, neighbours), that overflow (infinite noise,
     a tiny sigma) or that silently change the behaviour (a minimum above its maximum, a timeout
     shorter than the input's period) are one line naming the file and the field."""
     path = tmp_path / "localizer.yaml"
-    path.write_text(text)
+    path.write_text(text + "\n")
     with pytest.raises(ConfigError) as info:
         load_localizer_config(path)
     message = str(info.value)
-    assert message.startswith(f"{path}: ") and expected in message and "\n" not in message
+    assert message.startswith(f"{path}: ") and "\n" not in message
+    assert f"{field}: " in message and words in message.partition(f"{field}: ")[2]
