@@ -36,6 +36,7 @@ if TYPE_CHECKING:
     import numpy as np
 
     from tagloc.cli.bag_camera import BagCamera
+    from tagloc.io import BagTopic
     from tagloc.localize.config import LocalizerConfig
     from tagloc.localize.node import LocalizerNode
     from tagloc.messages import Message
@@ -268,8 +269,31 @@ def _bag_node(
                                    family)  # fmt: skip
     wanted = [t for t in topics if t in source.bag_topics]
     wanted += [t for t in source.bag_topics if t.rstrip("/").endswith("tf_static")]
+    not_clouds = _lidar_not_point_clouds(bag, source.bag_topics.get(roles.lidar), roles.lidar,
+                                         premap is not None)  # fmt: skip
+    if not_clouds:
+        wanted.remove(roles.lidar)
     source = BagSource(bag, sorted(set(wanted)), corner_order=cam.corner_order,
                        default_family=family)  # fmt: skip
     node = LocalizerNode(tag_map, cfg, camera=camera, T_base_cam=T_base_cam, topics=roles,
                          premap=premap)  # fmt: skip
+    if not_clouds:
+        node.skipped["lidar_not_point_cloud"] += not_clouds
     return WiredNode(node, source, bag.name, checked)
+
+
+def _lidar_not_point_clouds(bag: Path, info: BagTopic | None, topic: str, premap: bool) -> int:
+    """How many messages of the lidar topic are not ``PointCloud2`` sweeps (a ``LaserScan``):
+    without a premap the lidar is not used and they are a counted skip; with one, an error."""
+    from tagloc.localize import LocalizeError
+
+    if info is None or info.msgtype == "sensor_msgs/msg/PointCloud2":
+        return 0
+    if premap:
+        raise LocalizeError(
+            f"{bag}: --lidar-topic {topic} has type {info.msgtype}; the lidar fixes need "
+            "sensor_msgs/msg/PointCloud2 sweeps"
+        )
+    logger.warning("%s: %s has type %s, not PointCloud2: its %d messages are skipped",
+                   bag, topic, info.msgtype, info.msgcount)  # fmt: skip
+    return max(int(info.msgcount), 1)
