@@ -49,6 +49,11 @@ _TIME_FIELDS = ("t", "time", "offset_time", "timestamp")
 
 def point_cloud(msg: Any, log_ns: int, opts: DecodeOptions, static: bool) -> Decoded:
     """The decoder of ``sensor_msgs/msg/PointCloud2`` (:data:`tagloc.io.convert.DECODERS`)."""
+    with np.errstate(invalid="ignore", over="ignore"):  # signalling NaNs, float64 beyond float32
+        return _point_cloud(msg, log_ns, opts)
+
+
+def _point_cloud(msg: Any, log_ns: int, opts: DecodeOptions) -> Decoded:
     from tagloc.io.convert import Bad, stamp_of
 
     h, w, step, row_step = (int(v) for v in (msg.height, msg.width, msg.point_step, msg.row_step))

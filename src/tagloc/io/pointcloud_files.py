@@ -213,7 +213,8 @@ def _blocks(layout: Layout, handle: BinaryIO) -> Iterator[np.ndarray]:
         if len(data) < n * layout.dtype.itemsize:  # the file shrank while being read
             raise PointCloudFileError(f"{layout.name}: truncated while reading")
         records = np.frombuffer(data, dtype=layout.dtype, count=n)
-        block = np.stack([records[axis].astype(np.float64) for axis in "xyz"], axis=1)
+        with np.errstate(invalid="ignore"):  # signalling NaNs in the file: refused below
+            block = np.stack([records[axis].astype(np.float64) for axis in "xyz"], axis=1)
         bad = ~(np.abs(block) <= MAX_COORDINATE_M).all(axis=1)  # NaN compares False
         if bad.any():
             k = int(np.flatnonzero(bad)[0])
