@@ -29,6 +29,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from tagloc.config import FieldPathError, StrictModel
+from tagloc.errors import GeometryError
 from tagloc.geometry import SE3
 from tagloc.lidar.cloud import finite_points, voxel_downsample
 
@@ -37,6 +38,9 @@ __all__ = ["OccupancyConfig", "OccupancyGrid", "build_occupancy", "build_premap"
 #: Rays cast at once (bounds the memory of the traversed cells: 2048 rays of 30 m at 5 cm hold
 #: 1.2 M cells).
 _CHUNK = 2048
+#: Most cells of a grid built (200 MB of float64 log odds while building; a 100 m x 100 m floor at
+#: 2 cm is 25 M).
+MAX_GRID_CELLS = 25_000_000
 
 
 def _logit(p: float) -> float:
@@ -131,6 +135,11 @@ def build_occupancy(
     """Ray-cast scans ``(T_map_lidar, points_lidar (N, 3))`` into a 2D log-odds grid.
 
     The grid covers every sensor position and kept point, plus ``padding_m``.
+
+    Raises
+    ------
+    GeometryError
+        A grid of more than :data:`MAX_GRID_CELLS` cells (before it is allocated).
     """
     rays = [_band_rays(T_map_lidar, points, config) for T_map_lidar, points in scans]
     res = config.resolution_m
@@ -141,6 +150,11 @@ def build_occupancy(
         low, high = np.zeros(2), np.zeros(2)
     low = np.floor(low / res) * res
     width, height = (np.ceil((high - low) / res).astype(np.int64) + 1).tolist()
+    if width * height > MAX_GRID_CELLS:  # checked before the grid is allocated
+        raise GeometryError(
+            f"occupancy grid of {width} x {height} cells of {res:g} m: more than "
+            f"{MAX_GRID_CELLS} cells; use a coarser resolution_m or a shorter max_range_m"
+        )
     log_odds = np.zeros(height * width, dtype=np.float64)
     for origin, ends in rays:
         o = np.floor((origin - low) / res).astype(np.int64)
