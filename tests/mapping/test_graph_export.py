@@ -149,7 +149,9 @@ def test_exclusions_filter_only_what_they_name(
     assert exclude_observations(survey, []) is survey
     scans = SurveyScans(np.array([survey_start_ns(survey)]), (np.zeros((5, 3)),), (None,),
                         SE3.identity())  # fmt: skip
-    with_lidar = exclude_observations(dataclasses.replace(survey, lidar=scans), [parse_exclusion("tag:13")])
+    with_lidar = exclude_observations(
+        dataclasses.replace(survey, lidar=scans), [parse_exclusion("tag:13")]
+    )
     assert with_lidar.lidar is scans  # the sweeps stay: scan matching, premap and grid
     for text, message in [
         ("tag:x", "expected tag:ID"),
