@@ -220,7 +220,7 @@ def _blocks(layout: Layout, handle: BinaryIO) -> Iterator[np.ndarray]:
             k = int(np.flatnonzero(bad)[0])
             raise PointCloudFileError(
                 f"{layout.name}: point {start + k} {block[k].tolist()}: coordinates must be "
-                f"finite and within {MAX_COORDINATE_M:g} m ({int(bad.sum())} such points in "
-                f"points {start}..{start + n - 1})"
+                f"finite and within {MAX_COORDINATE_M:g} m ({int(bad.sum())} of points "
+                f"{start}..{start + n - 1} are not)"
             )
         yield block.reshape(-1, 3)
