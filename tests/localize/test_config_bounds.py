@@ -63,7 +63,7 @@ def test_huge_windows_and_distances_are_refused_not_overflowed() -> None:
     ("text", "field", "words"),
     [
         ("tags: {noise: {sigma_px: .inf}}", "tags.noise.sigma_px", "input should be a finite"),
-        ("tags: {noise: {sigma_px: 1.0e-300}}", "tags.noise.sigma_px", "input should be greater"),
+        ("tags: {noise: {sigma_px: 1.0e-300}}", "tags.noise.sigma_px", "must be at least 0.001"),
         ("tags: {noise: {floor_translation_m: .inf}}", "floor_translation_m", "should be a finite"),
         ("tags: {noise: {view_angle_gain: 1.0e300}}", "view_angle_gain", "input should be less"),
         ("tags: {family: tag99h99}", "tags.family", "unknown tag family 'tag99h99'"),
