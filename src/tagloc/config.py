@@ -33,6 +33,9 @@ from tagloc.errors import ConfigError, TaglocError
 UNIT_QUAT_TOL = 1e-6
 #: Largest YAML file or text read, bytes (a tag map of 10 000 tags is about 2 MB).
 MAX_YAML_BYTES = 4 * 2**20
+#: Most threads a native library (small_gicp, the AprilTag detector) may be asked for: above any
+#: robot's cores, below counts that crash a thread pool.
+MAX_THREADS = 64
 #: Longest quotation of a bad value in an error message, characters.
 MAX_QUOTED_CHARS = 60
 #: Longest problem description of a validation error, characters (a backstop for validators).

@@ -6,12 +6,17 @@
 - :func:`check_outputs`: every output path of a command, checked at once before it reads or
   computes anything, so a bad path fails in one line instead of after minutes of work (and leaves
   nothing behind).
+- :func:`removing_created_outputs`: around a command, removes again what the command created
+  where :func:`check_outputs` found nothing (its output directory, missing parents, its files)
+  if the command fails, also on Ctrl-C or a termination signal turned into ``SystemExit``; an
+  output directory that existed is left as it was (atomic writes never touched its files).
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 import tempfile
 from collections.abc import Callable, Collection, Iterator, Mapping
 from pathlib import Path
@@ -25,6 +30,45 @@ _TEMP_EXTRA = 14
 
 class OutputPathError(TaglocError, ValueError):
     """An output path that cannot be written; the message names the option and the path."""
+
+
+#: Per active :func:`removing_created_outputs`: the paths check_outputs found missing.
+_GUARDS: list[list[Path]] = []
+
+
+@contextlib.contextmanager
+def removing_created_outputs() -> Iterator[None]:
+    """Remove, if the block fails, every output path :func:`check_outputs` found missing in it.
+
+    A failure is any exception but ``SystemExit`` with code 0 (``sys.exit(0)`` of a command that
+    succeeded). Each path removed is the topmost of an output's missing ancestors (a directory
+    removed with what the command put in it) or a missing output file; nothing that existed when
+    :func:`check_outputs` looked is touched.
+    """
+    missing: list[Path] = []
+    _GUARDS.append(missing)
+    try:
+        yield
+    except BaseException as exc:
+        if not (isinstance(exc, SystemExit) and exc.code in (0, None)):
+            for path in reversed(missing):
+                if path.is_dir() and not path.is_symlink():
+                    shutil.rmtree(path, ignore_errors=True)
+                elif path.is_file() or path.is_symlink():
+                    path.unlink(missing_ok=True)
+        raise
+    finally:
+        _GUARDS.remove(missing)
+
+
+def _note_missing(path: Path) -> None:
+    """Record the topmost missing one of ``path`` and its ancestors with the active guard."""
+    if not _GUARDS or path.exists() or path.is_symlink():
+        return
+    while not path.parent.exists() and path.parent != path:
+        path = path.parent
+    if path not in _GUARDS[-1]:
+        _GUARDS[-1].append(path)
 
 
 @contextlib.contextmanager
@@ -192,6 +236,8 @@ def check_outputs(
         for path, option, shown, _ in claimed:
             if path == source:
                 raise OutputPathError(f"{option} {shown}: is also the input {name} {raw_input}")
+    for path, *_ in claimed:  # what a failed command removes again (removing_created_outputs)
+        _note_missing(path)
     return resolved
 
 

@@ -3,11 +3,15 @@ the path or value, exit code 1, no traceback, nothing written, and nothing the u
 
 from __future__ import annotations
 
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pytest
 
-from cli_runner import one_error_line, run_tagloc
+from cli_runner import _MAIN, _SRC, one_error_line, run_tagloc
 
 
 def _tree(root: Path) -> dict[str, bytes | None]:
@@ -156,3 +160,30 @@ def test_a_read_only_directory_is_refused_before_the_survey(site: Path) -> None:
         )
     finally:
         locked.chmod(0o755)
+
+
+@pytest.mark.parametrize(
+    ("signum", "code"),
+    [
+        (signal.SIGTERM, 128 + signal.SIGTERM),
+        pytest.param(signal.SIGINT, 130, marks=pytest.mark.slow),
+    ],
+)
+def test_a_terminated_run_leaves_nothing_it_created(
+    site: Path, signum: signal.Signals, code: int
+) -> None:
+    """A run stopped by a signal (a timeout's SIGTERM, Ctrl-C) removes the output directory it
+    created (the nested one and its missing parent) and leaves the rest as it was."""
+    before = _tree(site)
+    out = site / "new" / "run"
+    env = {"MPLBACKEND": "Agg", "PATH": "", "PYTHONPATH": _SRC}
+    args = ["localize", "--scenario", "default", "--out", str(out)]
+    with subprocess.Popen([sys.executable, "-c", _MAIN, *args], env=env, text=True,
+                          stdout=subprocess.PIPE, stderr=subprocess.PIPE) as run:  # fmt: skip
+        while not any(out.glob(".*.tmp*")) and run.poll() is None:  # the run is writing
+            time.sleep(0.2)
+        run.send_signal(signum)
+        _, stderr = run.communicate(timeout=120)
+    assert run.returncode == code, stderr
+    assert "Traceback" not in stderr
+    assert _tree(site) == before

@@ -59,3 +59,43 @@ def test_bad_premap_is_one_line_and_writes_nothing(
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and message in lines[0], done.stderr
     assert not out.exists()
+
+
+def test_a_laser_scan_on_the_lidar_topic_is_a_counted_skip_without_a_premap(
+    premap: Path, tmp_path: Path
+) -> None:
+    """A planar scanner's ``LaserScan`` where the sweeps would be: without ``--premap`` the lidar
+    is not used, so its messages are skipped and counted; with a premap, one error line."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).parents[1] / "io"))
+    from test_bag_errors import raw_bag
+
+    from tagloc.io.bag_writer import _Encoder
+    from tagloc.sim.scenarios import ScenarioSource
+    from tagloc.tags import save_tag_map
+
+    scenario = build_scenario("default", seed=2, duration_s=6.0)
+    enc = _Encoder(2)
+    scan_type = enc.store.types["sensor_msgs/msg/LaserScan"]
+    ranges, intensities = np.full(300, 5.0, np.float32), np.zeros(300, np.float32)
+    items, scans = [], 0
+    for seq, (topic, msg) in enumerate(ScenarioSource(scenario)):
+        ros = enc.encode(msg, seq)
+        if topic == "/lidar/points":
+            header = type(ros.header)(ros.header.stamp, "lidar")
+            ros = scan_type(header, -1.5, 1.5, 0.01, 0.0, 0.1, 0.1, 30.0, ranges, intensities)
+            items.append((topic, "sensor_msgs/msg/LaserScan", ros, msg.stamp_ns))
+            scans += 1
+        else:
+            items.append((topic, enc.msgtype(type(msg)), ros, msg.stamp_ns))
+    bag = raw_bag(tmp_path / "scan.mcap", items)
+    save_tag_map(scenario.tag_map, tmp_path / "tags.yaml")
+    args = ["localize", str(bag), "--tags", str(tmp_path / "tags.yaml"), "--no-bag"]
+    done = run_tagloc(*args, "--out", str(tmp_path / "out"))
+    assert done.returncode == 0, done.stderr
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert scans > 0 and summary["skipped"]["lidar_not_point_cloud"] == scans
+    done = run_tagloc(*args, "--premap", str(premap), "--out", str(tmp_path / "out2"))
+    assert done.returncode == 1 and "has type sensor_msgs/msg/LaserScan" in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1 and not (tmp_path / "out2").exists()

@@ -41,7 +41,8 @@ def test_export_graph_exclude_and_flags(tmp_path: Path) -> None:
     records = [json.loads(line) for line in graph.read_text().splitlines()]
     assert records[0]["type"] == "header" and records[0]["factors"] == len(records) - 1
     kinds = {r["type"] for r in records[1:]}
-    assert kinds == {"observation", "odometry", "anchor", "gravity"}
+    # the exclusions leave the survey's lidar sweeps: their scan-matching factors stay
+    assert kinds == {"observation", "odometry", "anchor", "gravity", "scan_match"}
     obs = [r for r in records if r["type"] == "observation"]
     assert all(r["tag"] != 13 and r["t_s"] > 1.0 for r in obs)
     (anchor,) = [r for r in records if r["type"] == "anchor"]

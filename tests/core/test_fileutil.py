@@ -13,6 +13,7 @@ from tagloc.fileutil import (
     atomic_write_text,
     atomic_write_texts,
     check_outputs,
+    removing_created_outputs,
 )
 
 
@@ -138,3 +139,34 @@ def test_check_outputs_refuses_names_the_file_system_cannot_hold(tmp_path: Path)
     with pytest.raises(OutputPathError, match=r"--out .*loop1/x\.yaml: cannot resolve the path"):
         check_outputs({"--out": tmp_path / "loop1" / "x.yaml"})
     assert sorted(p.name for p in tmp_path.iterdir()) == ["loop1", "loop2"]
+
+
+@pytest.mark.parametrize("failure", [RuntimeError("boom"), KeyboardInterrupt(), SystemExit(143)])
+def test_a_failed_command_removes_the_outputs_it_created(
+    tmp_path: Path, failure: BaseException
+) -> None:
+    (tmp_path / "old").mkdir()
+    (tmp_path / "old" / "keep.txt").write_text("kept\n")
+    with pytest.raises(type(failure)), removing_created_outputs():
+        outputs = {"--out": tmp_path / "new" / "run", "--into": tmp_path / "old"}
+        outputs["--csv"] = tmp_path / "a" / "b.csv"
+        check_outputs(outputs, directories={"--out": ["x.txt"], "--into": ["y.txt"]})
+        (tmp_path / "new" / "run").mkdir(parents=True)
+        (tmp_path / "new" / "run" / "x.txt").write_text("partial")
+        atomic_write_text(tmp_path / "old" / "y.txt", "new file in an existing directory")
+        atomic_write_text(tmp_path / "a" / "b.csv", "1,2\n")
+        raise failure
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["old"]
+    assert [p.name for p in (tmp_path / "old").iterdir()] == ["keep.txt"]
+
+
+def test_a_command_that_succeeds_keeps_its_outputs(tmp_path: Path) -> None:
+    with pytest.raises(SystemExit), removing_created_outputs():
+        check_outputs({"--out": tmp_path / "new"}, directories={"--out": []})
+        (tmp_path / "new").mkdir()
+        raise SystemExit(0)  # what click does after a command returns
+    assert (tmp_path / "new").is_dir()
+    with removing_created_outputs():  # outside a failing block nothing is removed either
+        check_outputs({"--out": tmp_path / "other"}, directories={"--out": []})
+        (tmp_path / "other").mkdir()
+    assert (tmp_path / "other").is_dir()

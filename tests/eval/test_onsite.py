@@ -123,6 +123,8 @@ def test_stops_and_their_spread_by_file() -> None:
 def test_a_bad_checkpoint_file_is_one_line() -> None:
     with pytest.raises(ConfigError, match=r"cp.yaml: checkpoints\[0\].radius"):
         parse_checkpoints("checkpoints:\n  - {name: a, x: 1, y: 2, radius: -1}\n", "cp.yaml")
+    with pytest.raises(ConfigError, match=r"cp.yaml: checkpoints\[1\].name: duplicate name 'a'"):
+        parse_checkpoints("checkpoints: [{name: a, x: 1, y: 2}, {name: a, x: 5, y: 2}]", "cp.yaml")
 
 
 def test_fused_pose_at_odometry_stamps_is_the_run() -> None:

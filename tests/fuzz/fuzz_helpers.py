@@ -7,7 +7,10 @@ document by NaN, 1e308, a huge integer, a string, a list, a nested mapping...
 
 from __future__ import annotations
 
+import contextlib
 import math
+import tracemalloc
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -105,3 +108,16 @@ def value_damage(text: str, data: st.DataObject) -> str:
     doc = yaml.safe_load(text)
     path = data.draw(st.sampled_from(leaf_paths(doc)), label="path")
     return yaml.safe_dump(replaced(doc, path, data.draw(NASTY, label="value")), sort_keys=False)
+
+
+@contextlib.contextmanager
+def bounded_memory(limit_bytes: int) -> Iterator[None]:
+    """Fail if the block's Python and numpy allocations peak above ``limit_bytes``
+    (``tracemalloc``: what a size claim in a file would make a reader allocate)."""
+    tracemalloc.start()
+    try:
+        yield
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak <= limit_bytes, f"allocated {peak} bytes, more than {limit_bytes}"

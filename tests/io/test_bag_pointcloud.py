@@ -169,3 +169,56 @@ def test_the_record_checks_its_arrays() -> None:
         PointCloudMsg(0, "lidar", points, None, np.array([0.0, 0.1, -0.01, 0.2]))
     with pytest.raises(RecordError, match="stamp_ns"):
         PointCloudMsg(-1, "lidar", points)
+
+
+def test_size_claims_and_time_extremes_are_skipped(tmp_path: Path) -> None:
+    """A cloud announcing more points than a sweep may hold is skipped before any point is
+    copied; a time field at its type's maximum (uint32 ns: 4.3 s, fine; uint64 ns, float32 s)
+    is checked against the sweep's span; points beyond the range limit are no returns."""
+    from tagloc.io.convert_cloud import MAX_POINT_RANGE_M, MAX_SWEEP_POINTS
+
+    rng = np.random.default_rng(8)
+    huge = encoded(cloud(rng, S))
+    huge.height, huge.width = 1, MAX_SWEEP_POINTS + 1  # claims 2 M points, holds 50
+    huge.row_step = huge.point_step * huge.width
+    msgs = [huge]
+    for kind, top in (("u4", np.iinfo(np.uint32).max), ("f4", np.finfo(np.float32).max),
+                      ("f8", np.finfo(np.float64).max)):  # fmt: skip
+        base = cloud(rng, 2 * S, n=5)
+        t = np.zeros(5)
+        t[-1] = top
+        xyz = [(axis, "f4", base.points[:, k]) for k, axis in enumerate("xyz")]
+        msgs.append(relayout(base, [*xyz, ("t", kind, t)], False))
+    far = cloud(rng, 3 * S, n=6)
+    points = far.points.copy()
+    points[1] = (2 * MAX_POINT_RANGE_M, 0.0, 0.0)
+    points[2] = (np.finfo(np.float32).max, 1.0, 1.0)
+    msgs.append(encoded(PointCloudMsg(3 * S, "lidar", points)))
+    items = [("/lidar/points", PC2, m, (i + 1) * S) for i, m in enumerate(msgs)]
+    source = BagSource(raw_bag(tmp_path / "a.mcap", items), ["/lidar/points"])
+    back = [m for _, m in source]
+    assert source.skipped == {"bad_point_cloud": 3}  # the huge one, float32 and float64 max
+    assert len(back) == 2 and isinstance(back[0], PointCloudMsg)
+    assert back[0].time_offset_s is not None
+    assert back[0].time_offset_s.max() == pytest.approx(4.294967295)
+    assert isinstance(back[1], PointCloudMsg)
+    assert np.isnan(back[1].points[1:3]).all() and np.isfinite(back[1].points[[0, 4, 5]]).all()
+
+
+def test_a_large_sweep_is_thinned_on_reading(tmp_path: Path) -> None:
+    """Oracle: points on a 5 cm lattice, 3 points per cube: the first of each cube is kept,
+    with its own intensity and time (the sweep is over the thinning threshold)."""
+    from tagloc.io.convert_cloud import SWEEP_KEEP_POINTS
+
+    n_cubes = SWEEP_KEEP_POINTS // 2
+    cubes = np.stack([np.arange(n_cubes) % 100, (np.arange(n_cubes) // 100) % 100,
+                      np.arange(n_cubes) // 10_000], axis=1) * 0.05 + 0.01  # fmt: skip
+    points = np.concatenate([cubes, cubes + 0.01, cubes + 0.02]).astype(np.float32)
+    t = np.linspace(0.0, 0.1, len(points)).astype(np.float32)
+    intensity = np.arange(len(points)).astype(np.float32)
+    msg = PointCloudMsg(S, "lidar", points, intensity, t)
+    [(_, back)] = list(BagSource(raw_bag(tmp_path / "a.mcap", [("/p", PC2, encoded(msg), S)])))
+    assert isinstance(back, PointCloudMsg) and len(back.points) == n_cubes
+    np.testing.assert_array_equal(back.points, points[:n_cubes])
+    np.testing.assert_array_equal(back.intensity, intensity[:n_cubes])  # type: ignore[arg-type]
+    np.testing.assert_array_equal(back.time_offset_s, t[:n_cubes])  # type: ignore[arg-type]

@@ -107,6 +107,10 @@ def _yaml(tmp_path: Path, **changes: object) -> Path:
         ({"mode": "raw"}, MapFileError, "mode 'raw'"),
         ({"free_thresh": 0.7}, ConfigError, "free_thresh"),
         ({"image": "missing.pgm"}, MapFileError, "cannot read map image"),
+        ({"image": "."}, MapFileError, "not a regular file"),
+        ({"resolution": 1e-300}, ConfigError, "resolution"),
+        ({"origin": [1e300, 0.0, 0.0]}, ConfigError, "origin[0]: input should be less"),
+        ({"origin": [0.0, 0.0, 1e300]}, ConfigError, "origin[2]"),
     ],
 )
 def test_bad_yaml_fails_in_one_line(
@@ -127,6 +131,9 @@ def test_bad_yaml_fails_in_one_line(
         (b"P2\n2 2\n255\n0 0 0 0\n", "not a binary PGM"),
         (b"P5\n# c\n50 x\n255\n", "malformed PGM header"),
         (b"P5\n2 2\n65535\n" + b"\0" * 8, "need 8-bit"),
+        (b"P5\n100000 100000\n255\n" + b"\0" * 8, "more than 50000000 cells"),  # before reading
+        (b"P5\n" + b"9" * 5000 + b" 1\n255\n", "malformed PGM header"),  # not a 5000-digit int
+        (b"P5\n2 1\n255", "malformed PGM header"),
     ],
 )
 def test_bad_pgm_fails_in_one_line_naming_it(tmp_path: Path, data: bytes, message: str) -> None:

@@ -10,9 +10,11 @@ import small_gicp
 
 from tagloc.io.errors import InputNotFoundError
 from tagloc.io.pointcloud_files import (
+    MAX_COORDINATE_M,
     PointCloudFileError,
     read_pcd,
     read_ply,
+    read_premap,
     write_pcd,
     write_ply,
 )
@@ -135,3 +137,63 @@ def test_a_failed_write_keeps_the_previous_file(tmp_path: Path, points: np.ndarr
     with pytest.raises(PointCloudFileError):
         write_ply(path, np.zeros((2, 4)))
     assert path.read_bytes() == before
+
+
+# ----- bounds: sizes checked against the file before anything is allocated -----------------------
+@pytest.mark.parametrize(
+    ("replace", "message"),
+    [
+        (("POINTS 3", "POINTS 1000000000"), "truncated: 1000000000 points need 12000000000"),
+        (("COUNT 1 1 1", "COUNT 1 1 1000000000"), "more than 256 fields"),
+        (("SIZE 4 4 4", "SIZE 4 4 " + "9" * 400), "SIZE 99999"),
+        (("POINTS 3", "POINTS " + "9" * 400), "POINTS 99999"),
+    ],
+)
+def test_size_claims_are_checked_against_the_file(
+    tmp_path: Path, replace: tuple[str, str], message: str
+) -> None:
+    good = tmp_path / "good.pcd"
+    write_pcd(good, np.zeros((3, 3)))
+    path = tmp_path / "bad.pcd"
+    path.write_bytes(good.read_bytes().replace(*(r.encode() for r in replace), 1))
+    with pytest.raises(PointCloudFileError) as info:
+        read_pcd(path)
+    text = str(info.value)
+    assert text.startswith(f"{path}: ") and message in text and len(text) < 300
+
+
+def test_point_cap_and_non_finite_points(tmp_path: Path, points: np.ndarray) -> None:
+    write_ply(tmp_path / "a.ply", points)
+    with pytest.raises(PointCloudFileError, match="1000 points, more than the 999 read at most"):
+        read_ply(tmp_path / "a.ply", max_points=999)
+    for bad in (np.nan, np.inf, 2 * MAX_COORDINATE_M):
+        points[500, 1] = bad
+        write_pcd(tmp_path / "b.pcd", points)
+        with pytest.raises(PointCloudFileError, match=r"point 500 .*finite and within"):
+            read_pcd(tmp_path / "b.pcd")
+
+
+def test_a_premap_above_the_cap_is_voxel_downsampled(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Oracle: the premap's points on a 5 cm grid (a plane of 200 x 200 cells), 4 points per
+    cell; above the cap each cell becomes its centroid, read in blocks smaller than the file."""
+    import tagloc.io.pointcloud_files as files
+
+    cells = (np.stack(np.meshgrid(np.arange(200), np.arange(200)), -1).reshape(-1, 2) + 0.5) * 0.05
+    jitter = np.array([[-0.01, -0.01], [0.01, 0.01], [-0.01, 0.01], [0.01, -0.01]])
+    xy = (cells[:, None, :] + jitter[None]).reshape(-1, 2)
+    write_pcd(tmp_path / "big.pcd", np.column_stack([xy, np.full(len(xy), 1.0)]))
+    assert len(read_premap(tmp_path / "big.pcd")) == len(xy)  # below the cap: as read
+    monkeypatch.setattr(files, "PREMAP_KEEP_POINTS", 50_000)
+    monkeypatch.setattr(files, "BLOCK_POINTS", 30_000)
+    kept = read_premap(tmp_path / "big.pcd")
+    assert len(kept) == 40_000
+    np.testing.assert_allclose(np.sort(kept[:, 0]), np.sort(np.repeat(cells[:, 0], 1)), atol=1e-6)
+    monkeypatch.setattr(files, "PREMAP_KEEP_POINTS", 10_000)  # 10 cm voxels: 4 cells each
+    assert len(read_premap(tmp_path / "big.pcd")) == 10_000
+    monkeypatch.setattr(files, "MAX_PREMAP_POINTS", 100_000)
+    with pytest.raises(PointCloudFileError, match="160000 points, more than the 100000"):
+        read_premap(tmp_path / "big.pcd")
+    with pytest.raises(PointCloudFileError, match=r"expected a \.ply or \.pcd"):
+        read_premap(tmp_path / "big.xyz")

@@ -90,3 +90,14 @@ def test_premap_merges_scans_in_map(scans: list[tuple[SE3, np.ndarray]]) -> None
     merged = np.concatenate([T.act(p[np.isfinite(p).all(axis=1)]) for T, p in scans[:3]])
     np.testing.assert_allclose(premap, voxel_downsample(merged, 0.2), atol=1e-12)
     assert build_premap([], 0.2).shape == (0, 3)
+
+
+def test_a_grid_beyond_the_cell_cap_is_refused_before_it_is_allocated() -> None:
+    from tagloc.errors import GeometryError
+    from tagloc.geometry import SE3
+    from tagloc.lidar.occupancy import MAX_GRID_CELLS, OccupancyConfig, build_occupancy
+
+    far = np.array([[900.0, 0.0, 1.0], [0.0, 900.0, 1.0]])  # 900 m at 5 mm: 3 * 10^10 cells
+    config = OccupancyConfig(resolution_m=0.005, max_range_m=1000.0)
+    with pytest.raises(GeometryError, match=f"more than {MAX_GRID_CELLS} cells"):
+        build_occupancy([(SE3.identity(), far)], config)

@@ -57,3 +57,39 @@ def test_huge_windows_and_distances_are_refused_not_overflowed() -> None:
         "localizer.yaml: gates.consistency_window_s: input should be less than or equal to "
         "1000000 (and 1 more error)"
     )
+
+
+@pytest.mark.parametrize(
+    ("text", "field", "words"),
+    [
+        ("tags: {noise: {sigma_px: .inf}}", "tags.noise.sigma_px", "input should be a finite"),
+        ("tags: {noise: {sigma_px: 1.0e-300}}", "tags.noise.sigma_px", "must be at least 0.001"),
+        ("tags: {noise: {floor_translation_m: .inf}}", "floor_translation_m", "should be a finite"),
+        ("tags: {noise: {view_angle_gain: 1.0e300}}", "view_angle_gain", "input should be less"),
+        ("tags: {family: tag99h99}", "tags.family", "unknown tag family 'tag99h99'"),
+        ("gates: {max_hamming: 1000000000}", "gates.max_hamming", "input should be less"),
+        ("gates: {prior_gate_chi2: .inf}", "gates.prior_gate_chi2", "input should be a finite"),
+        ("kidnap: {n_fixes: 3, min_sources: 5}", "kidnap.min_sources", "must be at most n_fixes"),
+        ("supervisor: {camera: {timeout_s: 0.01}}", "camera.timeout_s", "must be above the period"),
+        ("supervisor: {ladder: {enter_nis: 1.0e300}}", "ladder.enter_nis", "input should be less"),
+        ("lidar: {fix: {min_range_m: 50}}", "lidar.fix.min_range_m", "must be below max_range_m"),
+        ("lidar: {fix: {registration: {num_threads: 100000}}}", "num_threads", "equal to 64"),
+        ("lidar: {fix: {registration: {max_iterations: 1.0e9}}}", "max_iterations", "input"),
+        ("lidar: {fix: {registration: {num_neighbors: 1000000000}}}", "num_neighbors", "less"),
+        ("lidar: {fix: {registration: {voxel_m: 1.0e-9}}}", "voxel_m", "should be greater"),
+        ("lidar: {fix: {covariance_inflation: 1.0e300}}", "covariance_inflation", "should be less"),
+    ],
+)
+def test_every_section_refuses_values_out_of_range_or_order(
+    tmp_path: Path, text: str, field: str, words: str
+) -> None:
+    """Values that native code cannot take (threads, neighbours), that overflow (infinite noise,
+    a tiny sigma) or that silently change the behaviour (a minimum above its maximum, a timeout
+    shorter than the input's period) are one line naming the file and the field."""
+    path = tmp_path / "localizer.yaml"
+    path.write_text(text + "\n")
+    with pytest.raises(ConfigError) as info:
+        load_localizer_config(path)
+    message = str(info.value)
+    assert message.startswith(f"{path}: ") and "\n" not in message
+    assert f"{field}: " in message and words in message.partition(f"{field}: ")[2]

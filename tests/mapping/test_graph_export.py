@@ -22,6 +22,7 @@ from tagloc.geometry import SE3
 from tagloc.mapping import BuildReport, MappingError, Survey, build_tag_map
 from tagloc.mapping.exclude import exclude_observations, survey_start_ns
 from tagloc.mapping.survey import CameraFrame
+from tagloc.mapping.survey_scans import SurveyScans
 from tagloc.sim import ObservationConfig, World, load_default_world, simulate_drive
 from tagloc.sim.survey import sim_build_config, survey_from_drive
 from tagloc.tags.tagmap import TagMap
@@ -146,11 +147,19 @@ def test_exclusions_filter_only_what_they_name(
     start = survey_start_ns(survey)
     assert all((f.stamp_ns - start) * 1e-9 > 10 or not f.detections for f in window.frames)
     assert exclude_observations(survey, []) is survey
+    scans = SurveyScans(np.array([survey_start_ns(survey)]), (np.zeros((5, 3)),), (None,),
+                        SE3.identity())  # fmt: skip
+    with_lidar = exclude_observations(
+        dataclasses.replace(survey, lidar=scans), [parse_exclusion("tag:13")]
+    )
+    assert with_lidar.lidar is scans  # the sweeps stay: scan matching, premap and grid
     for text, message in [
         ("tag:x", "expected tag:ID"),
         ("time:5", "expected tag:ID"),
         ("frame:3", "expected tag:ID"),
         ("time:9-3", "ends before it starts"),
+        ("tag:13@", "expected tag:ID"),  # not "all of tag 13"
+        ("tag:13@5", "expected tag:ID"),
     ]:
         with pytest.raises(MappingError, match=message):
             parse_exclusion(text)

@@ -412,8 +412,12 @@ def test_registry_builds_and_refuses_clearly() -> None:
         make_detector("apriltag", "aruco_4x4_50")
     with pytest.raises(TagBackendError, match=r"unknown option\(s\) quad_decimation"):
         make_detector("apriltag", quad_decimation=2.0)
-    with pytest.raises(TagBackendError, match="quad_decimate: expected a finite number >= 1"):
+    with pytest.raises(TagBackendError, match="quad_decimate: expected a number from 1 to 64"):
         make_detector("apriltag", quad_decimate=0.5)
+    with pytest.raises(TagBackendError, match="nthreads: expected an int from 1 to 64"):
+        make_detector("apriltag", nthreads=2**40)  # would reach the library's thread pool
+    with pytest.raises(TagBackendError, match="corner_refinement_win_size: expected an int from"):
+        make_detector("aruco", corner_refinement_win_size=2**40)
     with pytest.raises(TagBackendError, match="corner_refinement: 'apriltag' not one of"):
         make_detector("aruco", corner_refinement="apriltag")
 

@@ -1,7 +1,9 @@
 """The ``tagloc`` command line: thin typer glue over pure functions that return result objects.
 
 Every :class:`~tagloc.errors.TaglocError` becomes one line on stderr and exit code 1; anything
-else is a bug and keeps its traceback. Heavy modules are imported inside the commands so
+else is a bug and keeps its traceback. A command that fails (an error, Ctrl-C, SIGTERM or SIGHUP)
+leaves no output it created (:func:`tagloc.fileutil.removing_created_outputs`); a termination
+signal exits with ``128 + signal``. Heavy modules are imported inside the commands so
 ``tagloc --help`` stays fast.
 """
 
@@ -9,13 +11,23 @@ from __future__ import annotations
 
 import inspect
 import os
+import signal
 import sys
+from types import FrameType
 
 import typer
 import typer.rich_utils
 
 from tagloc.cli.app import app
 from tagloc.errors import TaglocError
+from tagloc.fileutil import removing_created_outputs
+
+
+def _terminated(signum: int, frame: FrameType | None) -> None:
+    """A termination signal unwinds the command like an error (outputs removed on the way)."""
+    signal.signal(signum, signal.SIG_DFL)  # a second signal ends the process at once
+    print(f"tagloc: error: terminated by {signal.Signals(signum).name}", file=sys.stderr)
+    raise SystemExit(128 + signum)
 
 #: Width of the help when the output is not a terminal (a pipe, a file, ``less``) and neither
 #: ``COLUMNS`` nor ``TERMINAL_WIDTH`` says otherwise: rich would use 80.
@@ -32,8 +44,11 @@ def main() -> None:
         typer.rich_utils.MAX_WIDTH = HELP_WIDTH
     command = typer.main.get_command(app)
     unwrap_help(command)
+    for signum in (signal.SIGTERM, signal.SIGHUP):
+        signal.signal(signum, _terminated)
     try:
-        command(prog_name="tagloc")
+        with removing_created_outputs():
+            command(prog_name="tagloc")
     except TaglocError as exc:
         print(f"tagloc: error: {exc}", file=sys.stderr)
         sys.exit(1)

@@ -11,6 +11,7 @@ Each file is renamed into place only when the run ends well; on a failure nothin
 from __future__ import annotations
 
 import logging
+from collections import Counter
 from collections.abc import Iterable, Sequence
 from functools import partial
 from pathlib import Path
@@ -37,6 +38,7 @@ if TYPE_CHECKING:
     import numpy as np
 
     from tagloc.cli.bag_camera import BagCamera
+    from tagloc.io import BagTopic
     from tagloc.localize.config import LocalizerConfig
     from tagloc.localize.node import LocalizerNode
     from tagloc.localize.outputs import OutputSink
@@ -202,7 +204,12 @@ def localize_wired(
     except BaseException:
         sink.abort()
         raise
-    written, lines = sink.close({**node.metadata(), **extra})
+    metadata = node.metadata()
+    if wired.skipped:  # inputs left out before the node (a lidar topic that is not sweeps)
+        counts = Counter(metadata.get("skipped") or {})
+        counts.update(wired.skipped)
+        metadata["skipped"] = dict(counts)
+    written, lines = sink.close({**metadata, **extra})
     if check is not None and check.warning:
         lines.append(f"WARNING: {check.warning}")
     atomic_write_text(out / "localizer.yaml", node.config.to_yaml_text())
@@ -223,9 +230,10 @@ def _check_frames(node: LocalizerNode, n_frames: int) -> None:
 
 def _read_premap(path: Path) -> np.ndarray:
     """The premap's ``(N, 3)`` points from a PLY, PCD or dimos ``.pc2.lcm`` file (one-line
-    errors from io)."""
+    errors from io; a large PLY or PCD premap is voxel-downsampled on reading,
+    :func:`~tagloc.io.pointcloud_files.read_premap`)."""
     from tagloc.io.dimos_premap import PC2_LCM_SUFFIX, read_pc2_lcm
-    from tagloc.io.pointcloud_files import read_pcd, read_ply
+    from tagloc.io.pointcloud_files import read_premap
     from tagloc.localize import LocalizeError
 
     if path.name.lower().endswith(PC2_LCM_SUFFIX):
@@ -233,7 +241,7 @@ def _read_premap(path: Path) -> np.ndarray:
     suffix = path.suffix.lower()
     if suffix not in (".ply", ".pcd"):
         raise LocalizeError(f"--premap {path}: expected a .ply, .pcd or .pc2.lcm file")
-    return read_ply(path) if suffix == ".ply" else read_pcd(path)
+    return read_premap(path)
 
 
 def _check_premap(premap: np.ndarray | None, tag_map: TagMap, config: LocalizerConfig) -> None:
@@ -303,9 +311,31 @@ def _bag_node(
                                    family)  # fmt: skip
     wanted = [t for t in topics if t in source.bag_topics]
     wanted += [t for t in source.bag_topics if t.rstrip("/").endswith("tf_static")]
+    not_clouds = _lidar_not_point_clouds(bag, source.bag_topics.get(roles.lidar), roles.lidar,
+                                         premap is not None)  # fmt: skip
+    if not_clouds:
+        wanted.remove(roles.lidar)
     source = BagSource(bag, sorted(set(wanted)), corner_order=cam.corner_order,
                        default_family=family)  # fmt: skip
     _check_premap(premap, tag_map, config)
     node = partial(LocalizerNode, tag_map, config, camera=camera, T_base_cam=T_base_cam,
                    topics=roles, premap=premap)  # fmt: skip
-    return WiredNode(config, node, source, bag.name, checked, tag_map, premap)
+    skipped = {"lidar_not_point_cloud": not_clouds} if not_clouds else {}
+    return WiredNode(config, node, source, bag.name, checked, tag_map, premap, skipped)
+
+
+def _lidar_not_point_clouds(bag: Path, info: BagTopic | None, topic: str, premap: bool) -> int:
+    """How many messages of the lidar topic are not ``PointCloud2`` sweeps (a ``LaserScan``):
+    without a premap the lidar is not used and they are a counted skip; with one, an error."""
+    from tagloc.localize import LocalizeError
+
+    if info is None or info.msgtype == "sensor_msgs/msg/PointCloud2":
+        return 0
+    if premap:
+        raise LocalizeError(
+            f"{bag}: --lidar-topic {topic} has type {info.msgtype}; the lidar fixes need "
+            "sensor_msgs/msg/PointCloud2 sweeps"
+        )
+    logger.warning("%s: %s has type %s, not PointCloud2: its %d messages are skipped",
+                   bag, topic, info.msgtype, info.msgcount)  # fmt: skip
+    return max(int(info.msgcount), 1)

@@ -89,8 +89,8 @@ def parse_exclusion(text: str) -> Exclusion:
     kind, _, rest = text.partition(":")
     try:
         if kind == "tag":
-            tag, _, window = rest.partition("@")
-            t0, t1 = _range(window) if window else (None, None)
+            tag, at, window = rest.partition("@")
+            t0, t1 = _range(window) if at else (None, None)  # "tag:5@" is no window: an error
             tag_id: int | None = int(tag)
         elif kind == "time":
             tag_id, (t0, t1) = None, _range(rest)
@@ -118,12 +118,13 @@ def build_config(
     path: Path | None, base: MapBuildConfig, update: dict[str, object]
 ) -> MapBuildConfig:
     """``base`` updated by the ``--config`` YAML (MapBuildConfig fields), then by options."""
-    from tagloc.config import parse_yaml_mapping, validate
+    from tagloc.config import parse_yaml_mapping, read_text_file, validate
     from tagloc.mapping import MapBuildConfig
 
     data = base.model_dump()
     if path is not None:
-        data = _merged(data, parse_yaml_mapping(_read_text(path, "build configuration"), str(path)))
+        text = read_text_file(path, "build configuration")  # bounded, UTF-8
+        data = _merged(data, parse_yaml_mapping(text, str(path)))
     data = _merged(data, update)
     return validate(MapBuildConfig, data, str(path) if path is not None else "options")
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
@@ -28,3 +28,5 @@ class WiredNode:
     #: The map and premap the node localizes against (for the view).
     tag_map: TagMap | None = None
     premap: np.ndarray | None = None
+    #: Inputs left out before the node, by reason (counted in summary.json's ``skipped``).
+    skipped: dict[str, int] = field(default_factory=dict)

@@ -21,9 +21,9 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from pydantic import Field
+from pydantic import Field, model_validator
 
-from tagloc.config import StrictModel, parse_yaml_mapping, validate
+from tagloc.config import FieldPathError, StrictModel, parse_yaml_mapping, short_repr, validate
 from tagloc.localize.run import LocalizationRun
 from tagloc.units import S_NS
 
@@ -54,6 +54,18 @@ class CheckpointsFile(StrictModel):
     world file's, are ignored by :func:`parse_checkpoints`)."""
 
     checkpoints: tuple[CheckpointSpec, ...] = Field(min_length=1)
+
+    @model_validator(mode="after")
+    def _unique_names(self) -> CheckpointsFile:
+        first: dict[str, int] = {}
+        for k, spec in enumerate(self.checkpoints):
+            if spec.name in first:  # their visits would be merged into one spread
+                where = f"first at checkpoints[{first[spec.name]}]"
+                raise FieldPathError(
+                    ("checkpoints", k, "name"), f"duplicate name {short_repr(spec.name)} ({where})"
+                )
+            first[spec.name] = k
+        return self
 
 
 def parse_checkpoints(text: str, source: str) -> tuple[CheckpointSpec, ...]:

@@ -24,8 +24,10 @@ the writer, :mod:`tagloc.io.bag_writer`. Conventions, both ways:
   Livox ROS Driver 2 and Hesai). Drivers that stamp the sweep's end give negative offsets: the
   record's stamp is then moved to the earliest point and the offsets re-based on it, so they
   are ``>= 0``. Any byte order, padding and row step; a cloud whose data is shorter than its
-  ``height * row_step``, a field outside the point or of an unknown type is
-  ``Bad("bad_point_cloud")``.
+  ``height * row_step``, a field outside the point or of an unknown type, more points than
+  a sweep may hold or point times spanning more than a sweep may last is
+  ``Bad("bad_point_cloud")``; a large sweep is thinned on reading (:mod:`tagloc.io.convert_cloud`
+  has the limits).
 - Tag corners enter through :meth:`TagDetection.from_corners` with the reader's ``corner_order``
   and ``pixel_offset``; the writer stores tagloc's own order (``tl_tr_br_bl``, offset 0).
 """
@@ -43,6 +45,7 @@ import numpy as np
 from tagloc._types import FloatArray
 from tagloc.config import StrictModel
 from tagloc.geometry import SE3
+from tagloc.io.convert_cloud import point_cloud
 from tagloc.io.errors import BagFormatError
 from tagloc.messages import (
     CameraInfoMsg,
@@ -141,7 +144,7 @@ def cov_ros_from_body(cov_body: FloatArray, R: FloatArray) -> FloatArray:
 
 
 # ----- decoding ----------------------------------------------------------------------------------
-def _stamp(header: Any, log_ns: int, opts: DecodeOptions) -> int:
+def stamp_of(header: Any, log_ns: int, opts: DecodeOptions) -> int:
     if opts.stamp == "log":
         return log_ns
     return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
@@ -174,7 +177,7 @@ def _odometry(msg: Any, log_ns: int, opts: DecodeOptions, static: bool) -> Decod
     twist = (lin.x, lin.y, lin.z, ang.x, ang.y, ang.z)
     if isinstance(cov, Bad) or not all(map(math.isfinite, twist)):
         return [cov if isinstance(cov, Bad) else Bad("non_finite", f"twist {twist}")]
-    stamp = _stamp(msg.header, log_ns, opts)
+    stamp = stamp_of(msg.header, log_ns, opts)
     return [OdometryMsg(stamp, msg.header.frame_id, msg.child_frame_id, pose, cov, np.array(twist))]
 
 
@@ -183,14 +186,16 @@ def _pose_cov(msg: Any, log_ns: int, opts: DecodeOptions, static: bool) -> Decod
     cov = pose if isinstance(pose, Bad) else _cov(msg.pose.covariance, pose)
     if isinstance(cov, Bad) or isinstance(pose, Bad):
         return [cov if isinstance(cov, Bad) else pose]  # type: ignore[list-item]
-    return [PoseWithCovarianceMsg(_stamp(msg.header, log_ns, opts), msg.header.frame_id, pose, cov)]
+    return [
+        PoseWithCovarianceMsg(stamp_of(msg.header, log_ns, opts), msg.header.frame_id, pose, cov)
+    ]
 
 
 def _pose_stamped(msg: Any, log_ns: int, opts: DecodeOptions, static: bool) -> Decoded:
     pose = _pose(msg.pose.position, msg.pose.orientation, opts)
     if isinstance(pose, Bad):
         return [pose]
-    return [GroundTruthMsg(_stamp(msg.header, log_ns, opts), msg.header.frame_id, pose)]
+    return [GroundTruthMsg(stamp_of(msg.header, log_ns, opts), msg.header.frame_id, pose)]
 
 
 def _tf(msg: Any, log_ns: int, opts: DecodeOptions, static: bool) -> Decoded:
@@ -200,7 +205,7 @@ def _tf(msg: Any, log_ns: int, opts: DecodeOptions, static: bool) -> Decoded:
         if isinstance(pose, Bad):
             out.append(pose)
             continue
-        stamp = _stamp(tf.header, log_ns, opts)
+        stamp = stamp_of(tf.header, log_ns, opts)
         out.append(TransformMsg(stamp, tf.header.frame_id, tf.child_frame_id, pose, static))
     return out
 
@@ -226,7 +231,7 @@ def _image(msg: Any, log_ns: int, opts: DecodeOptions, static: bool) -> Decoded:
     image = rows.reshape((h, w) if channels == 1 else (h, w, 3))
     if encoding == "rgb8":
         image, encoding = np.ascontiguousarray(image[..., ::-1]), "bgr8"
-    return [ImageMsg(_stamp(msg.header, log_ns, opts), msg.header.frame_id, image, encoding)]
+    return [ImageMsg(stamp_of(msg.header, log_ns, opts), msg.header.frame_id, image, encoding)]
 
 
 def _compressed(msg: Any, log_ns: int, opts: DecodeOptions, static: bool) -> Decoded:
@@ -243,7 +248,7 @@ def _compressed(msg: Any, log_ns: int, opts: DecodeOptions, static: bool) -> Dec
     if image.ndim == 3 and image.shape[2] == 1:
         image = image[..., 0]
     encoding = "mono8" if image.ndim == 2 else "bgr8"
-    return [ImageMsg(_stamp(msg.header, log_ns, opts), msg.header.frame_id, image, encoding)]
+    return [ImageMsg(stamp_of(msg.header, log_ns, opts), msg.header.frame_id, image, encoding)]
 
 
 def _camera_info(msg: Any, log_ns: int, opts: DecodeOptions, static: bool) -> Decoded:
@@ -258,66 +263,7 @@ def _camera_info(msg: Any, log_ns: int, opts: DecodeOptions, static: bool) -> De
         "roi": {f: getattr(roi, f) for f in ("x_offset", "y_offset", "height", "width")}
         | {"do_rectify": bool(roi.do_rectify)},
     }
-    return [CameraInfoMsg(_stamp(msg.header, log_ns, opts), msg.header.frame_id, info)]
-
-
-_POINT_FIELD_TYPES = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
-_TIME_FIELDS = ("t", "time", "offset_time", "timestamp")
-
-
-def _point_cloud(msg: Any, log_ns: int, opts: DecodeOptions, static: bool) -> Decoded:
-    h, w, step, row_step = (int(v) for v in (msg.height, msg.width, msg.point_step, msg.row_step))
-    data = np.asarray(msg.data, dtype=np.uint8)
-    shape = f"{h}x{w} cloud, point_step {step}, row_step {row_step}, {data.size} bytes"
-    if h * w and (row_step < w * step or data.size < h * row_step):
-        return [Bad("bad_point_cloud", f"{shape}: data too short")]
-    order = ">" if msg.is_bigendian else "<"
-    fields: dict[str, tuple[str, int]] = {}
-    for field in msg.fields:
-        kind = _POINT_FIELD_TYPES.get(int(field.datatype))
-        if kind is None or int(field.offset) + int(kind[1]) > step:
-            return [Bad("bad_point_cloud", f"{shape}: field {field.name!r} does not fit a point")]
-        fields.setdefault(str(field.name), (order + kind, int(field.offset)))
-    if missing := [n for n in "xyz" if n not in fields]:
-        return [Bad("bad_point_cloud", f"{shape}: no field(s) {missing}")]
-    rows = data[: h * row_step].reshape(h, row_step)[:, : w * step] if h * w else data[:0]
-    raw = (
-        np.ascontiguousarray(rows).reshape(h * w, step) if h * w else np.zeros((0, step), np.uint8)
-    )
-
-    def column(name: str) -> Any:
-        kind, offset = fields[name]
-        return raw[:, offset : offset + int(kind[2])].copy().view(kind)[:, 0]
-
-    points = np.stack([column(n) for n in "xyz"], axis=1).astype(np.float32)
-    intensity = column("intensity").astype(np.float32) if "intensity" in fields else None
-    stamp = _stamp(msg.header, log_ns, opts)
-    offsets = _time_offsets(fields, column, stamp)
-    if offsets is not None and len(offsets):
-        if not np.isfinite(offsets).all():
-            return [Bad("non_finite", f"{shape}: point times hold NaN or inf")]
-        if (earliest := float(offsets.min())) < 0.0:
-            stamp, offsets = stamp + round(earliest * 1e9), offsets - earliest
-            if stamp < 0:
-                return [Bad("bad_point_cloud", f"{shape}: points measured before time 0")]
-    offsets32 = None if offsets is None else offsets.astype(np.float32)
-    return [PointCloudMsg(stamp, msg.header.frame_id, points, intensity, offsets32)]
-
-
-def _time_offsets(fields: Mapping[str, Any], column: Callable[[str], Any], stamp: int) -> Any:
-    """Per-point seconds after ``stamp`` (float64), or None (see the module docstring)."""
-    name = next((n for n in _TIME_FIELDS if n in fields), None)
-    if name is None:
-        return None
-    values, integer = column(name), fields[name][0][1] in "iu"
-    if name == "offset_time" or (name == "t" and integer):
-        return values.astype(np.float64) * 1e-9
-    if name in ("t", "time"):
-        return values.astype(np.float64)
-    values = values.astype(np.float64)
-    if len(values) and np.nanmax(np.abs(values)) > 1e12:  # absolute nanoseconds
-        return (values - float(stamp)) * 1e-9
-    return values - stamp * 1e-9
+    return [CameraInfoMsg(stamp_of(msg.header, log_ns, opts), msg.header.frame_id, info)]
 
 
 def resolve_family(name: str, opts: DecodeOptions) -> str | Bad:
@@ -381,7 +327,7 @@ def _tags(msg: Any, tags: Any, log_ns: int, opts: DecodeOptions, ros1: bool) -> 
             bad.append(item)
         else:
             detections.append(item)
-    stamp = _stamp(msg.header, log_ns, opts)
+    stamp = stamp_of(msg.header, log_ns, opts)
     return [*bad, TagDetectionsMsg(stamp, msg.header.frame_id, tuple(detections))]
 
 
@@ -400,7 +346,7 @@ DECODERS: Mapping[str, tuple[Decoder, type[Message]]] = {
     "sensor_msgs/msg/Image": (_image, ImageMsg),
     "sensor_msgs/msg/CompressedImage": (_compressed, ImageMsg),
     "sensor_msgs/msg/CameraInfo": (_camera_info, CameraInfoMsg),
-    "sensor_msgs/msg/PointCloud2": (_point_cloud, PointCloudMsg),
+    "sensor_msgs/msg/PointCloud2": (point_cloud, PointCloudMsg),
     "tf2_msgs/msg/TFMessage": (_tf, TransformMsg),
     "tf/msg/tfMessage": (_tf, TransformMsg),
     "geometry_msgs/msg/PoseWithCovarianceStamped": (_pose_cov, PoseWithCovarianceMsg),

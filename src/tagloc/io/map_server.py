@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import Field
@@ -36,20 +36,27 @@ __all__ = ["MapFileError", "MapYaml", "read_map_server", "write_map_server"]
 
 PathArg = str | os.PathLike[str]
 OCCUPIED, FREE, UNKNOWN = 0, 254, 205
-#: Largest PGM read, bytes (a 100 m x 100 m floor at 2 cm is 25 MB).
-MAX_PGM_BYTES = 256 * 2**20
+#: Most cells of a grid read (a 100 m x 100 m floor at 2 cm is 25 M): 200 MB as float32 log odds.
+MAX_GRID_CELLS = 50_000_000
+#: Largest PGM header (magic, comments, width, height, maxval), bytes.
+MAX_PGM_HEADER_BYTES = 64 * 1024
+#: Largest ``origin`` x / y accepted, m.
+MAX_ORIGIN_M = 1e6
 
 
 class MapFileError(TaglocIOError, ValueError):
     """A map YAML or PGM that cannot be read or written; the message names the file."""
 
 
+_OriginXY = Annotated[float, Field(ge=-MAX_ORIGIN_M, le=MAX_ORIGIN_M)]
+
+
 class MapYaml(StrictModel):
     """The map_server YAML."""
 
-    image: str = Field(min_length=1)
-    resolution: float = Field(gt=0.0)
-    origin: tuple[float, float, float]
+    image: str = Field(min_length=1, max_length=4096)
+    resolution: float = Field(ge=1e-4, le=100.0)
+    origin: tuple[_OriginXY, _OriginXY, Annotated[float, Field(ge=-1e3, le=1e3)]]
     negate: Literal[0, 1] = 0
     occupied_thresh: float = Field(0.65, gt=0.0, lt=1.0)
     free_thresh: float = Field(0.196, gt=0.0, lt=1.0)
@@ -109,13 +116,13 @@ def read_map_server(yaml_path: PathArg) -> OccupancyGrid:
     image = Path(meta.image)
     image = image if image.is_absolute() else Path(yaml_path).parent / image
     pixels = _read_pgm(image)
-    value = pixels.astype(np.float64)
+    value = np.arange(256, dtype=np.float64)  # a log odds per pixel value: one lookup
     p = value / 255.0 if meta.negate else (255.0 - value) / 255.0
-    log_odds = np.zeros(pixels.shape, dtype=np.float32)
-    log_odds[p > meta.occupied_thresh] = _logit((1.0 + meta.occupied_thresh) / 2.0)
-    log_odds[p < meta.free_thresh] = _logit(meta.free_thresh / 2.0)
+    table = np.zeros(256, dtype=np.float32)
+    table[p > meta.occupied_thresh] = _logit((1.0 + meta.occupied_thresh) / 2.0)
+    table[p < meta.free_thresh] = _logit(meta.free_thresh / 2.0)
     return OccupancyGrid(
-        log_odds=log_odds,
+        log_odds=table[pixels],
         resolution_m=meta.resolution,
         origin_xyz_yaw=(meta.origin[0], meta.origin[1], 0.0, meta.origin[2]),
         occupied_thresh=meta.occupied_thresh,
@@ -128,18 +135,41 @@ def _logit(p: float) -> float:
 
 
 def _read_pgm(path: Path) -> np.ndarray:
-    """``(H, W)`` uint8 of a binary PGM (``P5``, maxval <= 255; comments allowed)."""
+    """``(H, W)`` uint8 of a binary PGM (``P5``, maxval <= 255; comments allowed), at most
+    :data:`MAX_GRID_CELLS` pixels; the size is checked against the file before the pixels are
+    read."""
+    if path.exists() and not path.is_file():  # a directory, a FIFO, a device: never opened
+        raise MapFileError(f"{path}: the map image is not a regular file")
     try:
         with open(path, "rb") as handle:
-            raw = handle.read(MAX_PGM_BYTES + 1)
+            raw = handle.read(MAX_PGM_HEADER_BYTES)
+            width, height, pos = _pgm_header(path, raw)
+            cells = width * height
+            if cells > MAX_GRID_CELLS:
+                raise MapFileError(
+                    f"{path}: PGM {width}x{height} has more than {MAX_GRID_CELLS} cells"
+                )
+            available = os.fstat(handle.fileno()).st_size - pos
+            if available < cells:
+                raise MapFileError(
+                    f"{path}: truncated PGM: {width}x{height} needs {cells} bytes, "
+                    f"has {max(available, 0)}"
+                )
+            handle.seek(pos)
+            body = handle.read(cells)
     except OSError as exc:
         raise MapFileError(f"{path}: cannot read map image: {exc.strerror or exc}") from None
-    if len(raw) > MAX_PGM_BYTES:
-        raise MapFileError(f"{path}: map image larger than {MAX_PGM_BYTES} bytes")
-    tokens: list[int] = []
-    pos = 2
+    if len(body) < cells:  # the file shrank while being read
+        raise MapFileError(f"{path}: truncated PGM while reading")
+    return np.frombuffer(body, dtype=np.uint8, count=cells).reshape(height, width)
+
+
+def _pgm_header(path: Path, raw: bytes) -> tuple[int, int, int]:
+    """Width, height and the offset of the first pixel."""
     if raw[:2] != b"P5":
         raise MapFileError(f"{path}: not a binary PGM (P5) image")
+    tokens: list[int] = []
+    pos = 2
     while len(tokens) < 3:
         while pos < len(raw) and raw[pos : pos + 1].isspace():
             pos += 1
@@ -150,15 +180,12 @@ def _read_pgm(path: Path) -> np.ndarray:
         start = pos
         while pos < len(raw) and raw[pos : pos + 1].isdigit():
             pos += 1
-        if start == pos:
+        if start == pos or pos - start > 9 or pos >= len(raw):
             raise MapFileError(f"{path}: malformed PGM header")
         tokens.append(int(raw[start:pos]))
     width, height, maxval = tokens
     if not 0 < maxval <= 255 or width <= 0 or height <= 0:
         raise MapFileError(f"{path}: PGM {width}x{height} maxval {maxval}: need 8-bit and > 0")
-    body = raw[pos + 1 :]
-    if len(body) < width * height:
-        raise MapFileError(
-            f"{path}: truncated PGM: {width}x{height} needs {width * height} bytes, has {len(body)}"
-        )
-    return np.frombuffer(body, dtype=np.uint8, count=width * height).reshape(height, width)
+    if not raw[pos : pos + 1].isspace():
+        raise MapFileError(f"{path}: malformed PGM header")
+    return width, height, pos + 1

@@ -6,36 +6,67 @@ Written by :func:`write_ply` / :func:`write_pcd` with a header comment naming th
 or point fields include ``x``, ``y``, ``z`` (other fields, any numeric type, are skipped; PLY
 ``binary_little_endian`` with ``vertex`` as its first element, PCD ``DATA binary``). A truncated
 or malformed file fails with one line naming it (:class:`PointCloudFileError`).
+
+Bounds, checked against the header and the file's size before any point is read: a header of at
+most 64 KiB and 256 fields (:mod:`tagloc.io._cloud_headers`); the points the header announces
+present in the file; at most ``max_points`` of them (:data:`MAX_POINTS`, 5 M, by default: 120 MB
+as float64); every coordinate finite and within :data:`MAX_COORDINATE_M` (NaN rows of organized
+clouds are refused too: a premap is a map, not a sweep). The body is read in blocks of
+:data:`BLOCK_POINTS`, so a read needs the output and one block. :func:`read_premap` reads up to
+:data:`MAX_PREMAP_POINTS` (20 M, a sanity limit) and voxel-downsamples a premap of more than
+:data:`PREMAP_KEEP_POINTS` (1 M, a performance limit: registration downsamples the premap to its
+own voxel anyway) block by block, at the finest of 5, 10, 20, ... cm that keeps at most that many
+(a voxel that straddles blocks gets the mean of the blocks' centroids).
 """
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import os
+from collections.abc import Iterator
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 import numpy.typing as npt
 
 from tagloc.fileutil import atomic_path
-from tagloc.io.errors import InputNotFoundError, TaglocIOError
+from tagloc.io._cloud_headers import (
+    Layout,
+    PointCloudFileError,
+    pcd_layout,
+    ply_layout,
+)
+from tagloc.io.errors import InputNotFoundError
 
-__all__ = ["PointCloudFileError", "read_pcd", "read_ply", "write_pcd", "write_ply"]
+__all__ = [
+    "MAX_POINTS",
+    "MAX_PREMAP_POINTS",
+    "PREMAP_KEEP_POINTS",
+    "PointCloudFileError",
+    "read_pcd",
+    "read_ply",
+    "read_premap",
+    "write_pcd",
+    "write_ply",
+]
+
+logger = logging.getLogger(__name__)
 
 PathArg = str | os.PathLike[str]
-#: Longest header read, bytes (a header is a few hundred).
-MAX_HEADER_BYTES = 64 * 1024
-_PLY_TYPES = {
-    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "<i2", "int16": "<i2",
-    "ushort": "<u2", "uint16": "<u2", "int": "<i4", "int32": "<i4", "uint": "<u4",
-    "uint32": "<u4", "float": "<f4", "float32": "<f4", "double": "<f8", "float64": "<f8",
-}  # fmt: skip
-_PCD_TYPES = {("F", 4): "<f4", ("F", 8): "<f8", ("I", 1): "i1", ("I", 2): "<i2",
-              ("I", 4): "<i4", ("I", 8): "<i8", ("U", 1): "u1", ("U", 2): "<u2",
-              ("U", 4): "<u4", ("U", 8): "<u8"}  # fmt: skip
-
-
-class PointCloudFileError(TaglocIOError, ValueError):
-    """A PLY / PCD file that cannot be read or written; the message names the file."""
+#: Most points :func:`read_ply` / :func:`read_pcd` return by default (120 MB as float64).
+MAX_POINTS = 5_000_000
+#: Most points a premap file may hold (240 MB of float32 x y z): more is refused.
+MAX_PREMAP_POINTS = 20_000_000
+#: A premap of more points is voxel-downsampled on reading to at most this many.
+PREMAP_KEEP_POINTS = 1_000_000
+#: The finest voxel of that downsampling, m (doubled until the premap fits).
+PREMAP_VOXEL_M = 0.05
+#: Largest accepted coordinate magnitude, m (float32 resolves 1 cm up to 1e5 m).
+MAX_COORDINATE_M = 1e5
+#: Points converted per block.
+BLOCK_POINTS = 500_000
 
 
 def _float32_points(path: PathArg, points: npt.ArrayLike) -> np.ndarray:
@@ -77,7 +108,7 @@ def _write(path: PathArg, header: bytes, data: np.ndarray) -> None:
         handle.write(data.tobytes())
 
 
-def read_ply(path: PathArg) -> np.ndarray:
+def read_ply(path: PathArg, *, max_points: int = MAX_POINTS) -> np.ndarray:
     """``(N, 3)`` float64 points of a binary little-endian PLY file's ``vertex`` element.
 
     Raises
@@ -86,42 +117,14 @@ def read_ply(path: PathArg) -> np.ndarray:
         No such file.
     PointCloudFileError
         Not PLY, not ``binary_little_endian``, no ``x``/``y``/``z``, a list property in
-        ``vertex``, or fewer bytes than the header announces.
+        ``vertex``, fewer bytes than the header announces, more than ``max_points`` points, or a
+        coordinate that is not finite or beyond :data:`MAX_COORDINATE_M`.
     """
-    name, raw = _read(path)
-    lines, body = _header(name, raw, b"end_header\n", "PLY")
-    if not lines or lines[0] != "ply":
-        raise PointCloudFileError(f"{name}: not a PLY file (no 'ply' magic line)")
-    fields: list[tuple[str, str]] = []
-    count, element, fmt = -1, "", ""
-    for line in lines[1:]:
-        words = line.split()
-        if not words or words[0] in ("comment", "obj_info", "end_header"):
-            continue
-        if words[0] == "format":
-            fmt = words[1] if len(words) > 1 else ""
-        elif words[0] == "element" and len(words) == 3:
-            if count >= 0 and element == "vertex":
-                break  # later elements (faces) come after the vertices: not read
-            element, count = words[1], _int(name, words[2], "element count")
-            if element != "vertex":
-                raise PointCloudFileError(f"{name}: first element is {element!r}, not 'vertex'")
-        elif words[0] == "property" and element == "vertex":
-            if len(words) != 3 or words[1] not in _PLY_TYPES:
-                raise PointCloudFileError(f"{name}: unsupported vertex property {line!r}")
-            fields.append((words[2], _PLY_TYPES[words[1]]))
-        else:
-            raise PointCloudFileError(f"{name}: malformed PLY header line {line!r}")
-    if fmt != "binary_little_endian":
-        raise PointCloudFileError(
-            f"{name}: PLY format {fmt or 'missing'!r}; only binary_little_endian is read"
-        )
-    if count < 0:
-        raise PointCloudFileError(f"{name}: no 'element vertex' in the PLY header")
-    return _points(name, body, fields, count)
+    with _open(path) as (name, handle):
+        return _read_all(ply_layout(name, handle), handle, max_points)
 
 
-def read_pcd(path: PathArg) -> np.ndarray:
+def read_pcd(path: PathArg, *, max_points: int = MAX_POINTS) -> np.ndarray:
     """``(N, 3)`` float64 points of a ``DATA binary`` PCD file.
 
     Raises
@@ -130,89 +133,94 @@ def read_pcd(path: PathArg) -> np.ndarray:
         No such file.
     PointCloudFileError
         Missing or inconsistent FIELDS / SIZE / TYPE / COUNT / POINTS, ``DATA`` other than
-        ``binary``, no ``x``/``y``/``z``, or fewer bytes than the header announces.
+        ``binary``, no ``x``/``y``/``z``, fewer bytes than the header announces, more than
+        ``max_points`` points, or a coordinate that is not finite or beyond
+        :data:`MAX_COORDINATE_M`.
     """
-    name, raw = _read(path)
-    keys: dict[str, list[str]] = {}
-    end = raw.find(b"\nDATA ")
-    if end < 0 or end > MAX_HEADER_BYTES:
-        raise PointCloudFileError(f"{name}: not a PCD file (no DATA line in the header)")
-    lines, body = _header(name, raw, b"\n", "PCD", start=end + 1)
-    for line in lines:
-        words = line.split()
-        if words and not words[0].startswith("#"):
-            keys[words[0].upper()] = words[1:]
-    for key in ("FIELDS", "SIZE", "TYPE", "POINTS", "DATA"):
-        if key not in keys:
-            raise PointCloudFileError(f"{name}: PCD header has no {key} line")
-    if keys["DATA"] != ["binary"]:
-        raise PointCloudFileError(
-            f"{name}: PCD DATA {' '.join(keys['DATA'])!r}; only 'binary' is read"
-        )
-    names, sizes, types = keys["FIELDS"], keys["SIZE"], keys["TYPE"]
-    counts = keys.get("COUNT", ["1"] * len(names))
-    if not len(names) == len(sizes) == len(types) == len(counts):
-        raise PointCloudFileError(f"{name}: PCD FIELDS, SIZE, TYPE and COUNT differ in length")
-    fields: list[tuple[str, str]] = []
-    for field, size, kind, repeat in zip(names, sizes, types, counts, strict=True):
-        dtype = _PCD_TYPES.get((kind.upper(), _int(name, size, "SIZE")))
-        if dtype is None:
-            raise PointCloudFileError(f"{name}: unsupported PCD field {field} {kind}{size}")
-        reps = _int(name, repeat, "COUNT")
-        fields += [(field if reps == 1 else f"{field}_{k}", dtype) for k in range(reps)]
-    return _points(
-        name, body, fields, _int(name, keys["POINTS"][0] if keys["POINTS"] else "", "POINTS")
-    )
+    with _open(path) as (name, handle):
+        return _read_all(pcd_layout(name, handle), handle, max_points)
 
 
-def _read(path: PathArg) -> tuple[str, bytes]:
+def read_premap(path: PathArg) -> np.ndarray:
+    """``(N, 3)`` float64 premap points of a ``.ply`` or ``.pcd`` file, at most
+    :data:`PREMAP_KEEP_POINTS` (voxel-downsampled on reading beyond that; module docstring).
+
+    Raises
+    ------
+    InputNotFoundError, PointCloudFileError
+        As :func:`read_ply` / :func:`read_pcd`; a file of more than :data:`MAX_PREMAP_POINTS`
+        points, or a suffix other than ``.ply`` / ``.pcd``.
+    """
+    suffix = Path(path).suffix.lower()
+    if suffix not in (".ply", ".pcd"):
+        raise PointCloudFileError(f"{os.fspath(path)}: expected a .ply or .pcd premap file")
+    with _open(path) as (name, handle):
+        layout = (ply_layout if suffix == ".ply" else pcd_layout)(name, handle)
+        _check_count(layout, MAX_PREMAP_POINTS)
+        if layout.count <= PREMAP_KEEP_POINTS:
+            return _read_all(layout, handle, PREMAP_KEEP_POINTS)
+        from tagloc.lidar.cloud import voxel_downsample
+
+        voxel_m, kept = PREMAP_VOXEL_M, np.zeros((0, 3))
+        for block in _blocks(layout, handle):  # memory: the points kept and one block
+            kept = voxel_downsample(np.concatenate([kept, block]), voxel_m)
+            while len(kept) > PREMAP_KEEP_POINTS:
+                voxel_m *= 2.0
+                kept = voxel_downsample(kept, voxel_m)
+    logger.info(
+        "%s: %d points downsampled on reading to %d (%g m voxels; at most %d are kept)",
+        name, layout.count, len(kept), voxel_m, PREMAP_KEEP_POINTS,
+    )  # fmt: skip
+    return kept
+
+
+@contextlib.contextmanager
+def _open(path: PathArg) -> Iterator[tuple[str, BinaryIO]]:
     name = os.fspath(path)
     if not Path(path).is_file():
         raise InputNotFoundError(f"{name}: no such point-cloud file")
     try:
-        return name, Path(path).read_bytes()
+        handle = open(path, "rb")  # noqa: SIM115 (closed below)
     except OSError as exc:
         raise PointCloudFileError(f"{name}: cannot read: {exc.strerror or exc}") from None
+    with handle:
+        yield name, handle
 
 
-def _header(
-    name: str, raw: bytes, end: bytes, kind: str, start: int = 0
-) -> tuple[list[str], bytes]:
-    """Header lines and the bytes after the header (which ends with ``end`` at/after ``start``)."""
-    stop = raw.find(end, start)
-    if stop < 0 or stop > MAX_HEADER_BYTES:
-        raise PointCloudFileError(f"{name}: truncated or not a {kind} file (no end of header)")
-    try:
-        text = raw[: stop + len(end)].decode("ascii")
-    except UnicodeDecodeError:
-        raise PointCloudFileError(f"{name}: {kind} header is not ASCII text") from None
-    return [line.strip() for line in text.splitlines() if line.strip()], raw[stop + len(end) :]
-
-
-def _int(name: str, text: str, what: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise PointCloudFileError(f"{name}: {what} {text!r} is not an integer") from None
-    if value < 0:
-        raise PointCloudFileError(f"{name}: {what} {value} is negative")
-    return value
-
-
-def _points(name: str, body: bytes, fields: list[tuple[str, str]], count: int) -> np.ndarray:
-    field_names = [f for f, _ in fields]
-    missing = [axis for axis in "xyz" if axis not in field_names]
-    if missing:
+def _check_count(layout: Layout, max_points: int) -> None:
+    if layout.count > max_points:
         raise PointCloudFileError(
-            f"{name}: no field {', '.join(missing)} (fields: {' '.join(field_names)})"
+            f"{layout.name}: {layout.count} points, more than the {max_points} read at most"
         )
-    if len(set(field_names)) != len(field_names):
-        raise PointCloudFileError(f"{name}: duplicate field names {' '.join(field_names)}")
-    dtype = np.dtype(fields)
-    if len(body) < count * dtype.itemsize:
-        raise PointCloudFileError(
-            f"{name}: truncated: {count} points need {count * dtype.itemsize} bytes, "
-            f"the file has {len(body)}"
-        )
-    records = np.frombuffer(body, dtype=dtype, count=count)
-    return np.stack([records[axis].astype(np.float64) for axis in "xyz"], axis=1).reshape(-1, 3)
+
+
+def _read_all(layout: Layout, handle: BinaryIO, max_points: int) -> np.ndarray:
+    _check_count(layout, max_points)
+    out = np.empty((layout.count, 3), dtype=np.float64)
+    done = 0
+    for block in _blocks(layout, handle):
+        out[done : done + len(block)] = block
+        done += len(block)
+    return out
+
+
+def _blocks(layout: Layout, handle: BinaryIO) -> Iterator[np.ndarray]:
+    """The points as ``(k, 3)`` float64 blocks of at most :data:`BLOCK_POINTS`, each checked."""
+    handle.seek(layout.offset)
+    for start in range(0, layout.count, BLOCK_POINTS):
+        n = min(BLOCK_POINTS, layout.count - start)
+        data = handle.read(n * layout.dtype.itemsize)
+        if len(data) < n * layout.dtype.itemsize:  # the file shrank while being read
+            raise PointCloudFileError(f"{layout.name}: truncated while reading")
+        records = np.frombuffer(data, dtype=layout.dtype, count=n)
+        with np.errstate(invalid="ignore"):  # signalling NaNs in the file: refused below
+            block = np.stack([records[axis].astype(np.float64) for axis in "xyz"], axis=1)
+        bad = ~(np.abs(block) <= MAX_COORDINATE_M).all(axis=1)  # NaN compares False
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            raise PointCloudFileError(
+                f"{layout.name}: point {start + k} {block[k].tolist()}: coordinates must be "
+                f"finite and within {MAX_COORDINATE_M:g} m ({int(bad.sum())} of points "
+                f"{start}..{start + n - 1} are not)"
+            )
+        yield block.reshape(-1, 3)

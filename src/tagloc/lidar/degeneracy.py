@@ -41,7 +41,7 @@ class DegeneracyConfig(StrictModel):
     min_eigenvalue_ratio: float = Field(0.003, gt=0.0, lt=1.0)
     """A direction is constrained when its eigenvalue is at least this fraction of the largest
     one of its block (translation or rotation)."""
-    min_information: float = Field(1e-9, ge=0.0)
+    min_information: float = Field(1e-9, ge=0.0, le=1e12)
     """... and at least this (absolute, the Hessian's units): an all-zero Hessian constrains
     nothing."""
 

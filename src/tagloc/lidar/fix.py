@@ -38,9 +38,9 @@ from typing import Literal
 
 import numpy as np
 import numpy.typing as npt
-from pydantic import Field
+from pydantic import Field, model_validator
 
-from tagloc.config import StrictModel
+from tagloc.config import FieldPathError, StrictModel
 from tagloc.errors import GeometryError
 from tagloc.geometry import SE3, SO3
 from tagloc.lidar.degeneracy import DegeneracyConfig, analyse_hessian
@@ -54,16 +54,16 @@ class LidarFixConfig(StrictModel):
 
     registration: RegistrationConfig = RegistrationConfig()
     degeneracy: DegeneracyConfig = DegeneracyConfig()
-    min_points: int = Field(200, ge=10)
+    min_points: int = Field(200, ge=10, le=1_000_000)
     """Fewer finite in-range points than this: rejected."""
-    min_range_m: float = Field(0.3, ge=0.0)
+    min_range_m: float = Field(0.3, ge=0.0, le=1e3)
     """Points closer than this to ``base`` (the robot's own body) are dropped."""
-    max_range_m: float = Field(40.0, gt=0.0)
+    max_range_m: float = Field(40.0, gt=0.0, le=1e4)
     """Points farther than this from ``base`` are dropped."""
     min_inlier_fraction: float = Field(0.5, ge=0.0, le=1.0)
     """Fewer of the downsampled points with a premap point within ``max_correspondence_m``:
     rejected (the scan sees much that the premap does not hold, or the prior is far off)."""
-    max_rmse_m: float = Field(0.08, gt=0.0)
+    max_rmse_m: float = Field(0.08, gt=0.0, le=10.0)
     """Larger point-to-plane RMS of the inliers: rejected."""
     min_constrained: int = Field(1, ge=1, le=6)
     """Fewer constrained directions than this: rejected as degenerate."""
@@ -73,8 +73,14 @@ class LidarFixConfig(StrictModel):
     the constrained directions have long settled (the remapping discards the sliding)."""
     covariance_model: Literal["sandwich", "scaled"] = "sandwich"
     """``sandwich``: heteroscedasticity-robust (default); ``scaled``: ``sigma^2 H^-1``."""
-    covariance_inflation: float = Field(1.5, ge=1.0)
+    covariance_inflation: float = Field(1.5, ge=1.0, le=1e6)
     """Factor on the covariance (see the module docstring: 1 is NEES-honest in simulation)."""
+
+    @model_validator(mode="after")
+    def _ordered(self) -> LidarFixConfig:
+        if not self.min_range_m < self.max_range_m:
+            raise FieldPathError(("min_range_m",), "must be below max_range_m")
+        return self
 
 
 @dataclass(frozen=True, slots=True, eq=False)

@@ -26,9 +26,10 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, model_validator
 
-from tagloc.config import StrictModel
+from tagloc.config import FieldPathError, StrictModel
+from tagloc.errors import GeometryError
 from tagloc.geometry import SE3
 from tagloc.lidar.cloud import finite_points, voxel_downsample
 
@@ -37,6 +38,9 @@ __all__ = ["OccupancyConfig", "OccupancyGrid", "build_occupancy", "build_premap"
 #: Rays cast at once (bounds the memory of the traversed cells: 2048 rays of 30 m at 5 cm hold
 #: 1.2 M cells).
 _CHUNK = 2048
+#: Most cells of a grid built (200 MB of float64 log odds while building; a 100 m x 100 m floor at
+#: 2 cm is 25 M).
+MAX_GRID_CELLS = 25_000_000
 
 
 def _logit(p: float) -> float:
@@ -46,22 +50,30 @@ def _logit(p: float) -> float:
 class OccupancyConfig(StrictModel):
     """How :func:`build_occupancy` rasterises scans."""
 
-    resolution_m: float = Field(0.05, gt=0.0)
+    resolution_m: float = Field(0.05, ge=0.005, le=10.0)
     """Cell edge (m)."""
-    z_min_m: float = 0.1
+    z_min_m: float = Field(0.1, ge=-1e3, le=1e3)
     """Lowest point height (m, ``map`` z; the floor is z = 0) that counts as an obstacle."""
-    z_max_m: float = 2.0
+    z_max_m: float = Field(2.0, ge=-1e3, le=1e3)
     """Highest point height (m) that counts (above: ceilings, lamps)."""
-    max_range_m: float = Field(30.0, gt=0.0)
+    max_range_m: float = Field(30.0, gt=0.0, le=1e4)
     """Points farther (horizontally) than this from the sensor are dropped."""
-    log_odds_hit: float = Field(_logit(0.6), gt=0.0)
-    log_odds_miss: float = Field(_logit(0.4), lt=0.0)
-    clamp_min: float = Field(_logit(0.12), lt=0.0)
-    clamp_max: float = Field(_logit(0.97), gt=0.0)
+    log_odds_hit: float = Field(_logit(0.6), gt=0.0, le=50.0)
+    log_odds_miss: float = Field(_logit(0.4), lt=0.0, ge=-50.0)
+    clamp_min: float = Field(_logit(0.12), lt=0.0, ge=-100.0)
+    clamp_max: float = Field(_logit(0.97), gt=0.0, le=100.0)
     occupied_thresh: float = Field(0.65, gt=0.0, lt=1.0)
     free_thresh: float = Field(0.196, gt=0.0, lt=1.0)
-    padding_m: float = Field(0.5, ge=0.0)
+    padding_m: float = Field(0.5, ge=0.0, le=1e3)
     """Margin (m) around the rays' extent."""
+
+    @model_validator(mode="after")
+    def _ordered(self) -> OccupancyConfig:
+        if not self.z_min_m < self.z_max_m:
+            raise FieldPathError(("z_min_m",), "must be below z_max_m")
+        if not self.free_thresh < self.occupied_thresh:
+            raise FieldPathError(("free_thresh",), "must be below occupied_thresh")
+        return self
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -123,6 +135,11 @@ def build_occupancy(
     """Ray-cast scans ``(T_map_lidar, points_lidar (N, 3))`` into a 2D log-odds grid.
 
     The grid covers every sensor position and kept point, plus ``padding_m``.
+
+    Raises
+    ------
+    GeometryError
+        A grid of more than :data:`MAX_GRID_CELLS` cells (before it is allocated).
     """
     rays = [_band_rays(T_map_lidar, points, config) for T_map_lidar, points in scans]
     res = config.resolution_m
@@ -133,6 +150,11 @@ def build_occupancy(
         low, high = np.zeros(2), np.zeros(2)
     low = np.floor(low / res) * res
     width, height = (np.ceil((high - low) / res).astype(np.int64) + 1).tolist()
+    if width * height > MAX_GRID_CELLS:  # checked before the grid is allocated
+        raise GeometryError(
+            f"occupancy grid of {width} x {height} cells of {res:g} m: more than "
+            f"{MAX_GRID_CELLS} cells; use a coarser resolution_m or a shorter max_range_m"
+        )
     log_odds = np.zeros(height * width, dtype=np.float64)
     for origin, ends in rays:
         o = np.floor((origin - low) / res).astype(np.int64)

@@ -27,7 +27,7 @@ import numpy.typing as npt
 import small_gicp
 from pydantic import Field
 
-from tagloc.config import StrictModel
+from tagloc.config import MAX_THREADS, StrictModel
 from tagloc.geometry import SE3
 from tagloc.lidar.cloud import finite_points
 
@@ -40,24 +40,24 @@ SMALL_GICP_TO_TAGLOC = np.array([3, 4, 5, 0, 1, 2])
 class RegistrationConfig(StrictModel):
     """How a scan is registered against a target (small_gicp)."""
 
-    voxel_m: float = Field(0.25, gt=0.0)
+    voxel_m: float = Field(0.25, ge=0.01, le=10.0)
     """Voxel edge (m) both clouds are downsampled to before registration."""
-    max_correspondence_m: float = Field(1.0, gt=0.0)
+    max_correspondence_m: float = Field(1.0, gt=0.0, le=100.0)
     """Pairs farther apart than this (m) are outliers (not in the cost, not inliers)."""
-    max_iterations: int = Field(30, ge=1)
+    max_iterations: int = Field(30, ge=1, le=1000)
     """Gauss-Newton iterations at most."""
-    num_threads: int = Field(1, ge=1)
+    num_threads: int = Field(1, ge=1, le=MAX_THREADS)
     """Threads small_gicp may use (1: the node shares its core with the other fix sources)."""
     kernel: Literal["GICP", "PLANE_ICP", "ICP"] = "GICP"
     """The per-pair cost: ``GICP`` (distribution to distribution, default), ``PLANE_ICP``
     (point to plane) or ``ICP`` (point to point: biased between two differently sampled clouds,
     1 deg off in the room of ``tests/lidar/test_registration.py`` where the others are within
     0.1 deg; for comparison only)."""
-    num_neighbors: int = Field(10, ge=5)
+    num_neighbors: int = Field(10, ge=5, le=100)
     """Neighbours used to estimate each point's covariance / normal."""
-    rotation_epsilon_rad: float = Field(1e-4, gt=0.0)
+    rotation_epsilon_rad: float = Field(1e-4, gt=0.0, le=1.0)
     """Converged when a step rotates less than this (rad) ..."""
-    translation_epsilon_m: float = Field(1e-4, gt=0.0)
+    translation_epsilon_m: float = Field(1e-4, gt=0.0, le=1.0)
     """... and moves less than this (m)."""
 
 

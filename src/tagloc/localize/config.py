@@ -24,9 +24,15 @@ import os
 from typing import Annotated, Literal
 
 import yaml
-from pydantic import Field
+from pydantic import Field, model_validator
 
-from tagloc.config import StrictModel, parse_yaml_mapping, read_text_file, validate
+from tagloc.config import (
+    FieldPathError,
+    StrictModel,
+    parse_yaml_mapping,
+    read_text_file,
+    validate,
+)
 from tagloc.fileutil import atomic_write_text
 from tagloc.frames import OdometryFrameConfig
 from tagloc.localize.config_lidar import LidarConfig
@@ -129,6 +135,12 @@ class KidnapConfig(StrictModel):
     #: after ``suspect.min_gated`` fixes, long before this.
     n_fixes_one_source: int = Field(15, ge=0, le=100_000)
     one_source_min_jump_m: float = Field(1.0, ge=0, le=1e6)
+
+    @model_validator(mode="after")
+    def _sources_within_fixes(self) -> KidnapConfig:
+        if self.min_sources > self.n_fixes:  # n fixes could never come from that many sources
+            raise FieldPathError(("min_sources",), "must be at most n_fixes")
+        return self
 
 
 class SuspectConfig(StrictModel):

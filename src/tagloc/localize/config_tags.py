@@ -14,10 +14,11 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, field_validator, model_validator
 
-from tagloc.config import StrictModel
+from tagloc.config import StrictModel, short_repr
 from tagloc.tags import GateConfig, NoiseModel
+from tagloc.tags.families import known_families
 
 __all__ = ["FramesConfig", "GatesConfig", "TagSensorConfig"]
 
@@ -101,6 +102,14 @@ class TagSensorConfig(StrictModel):
     #: Detector backend for images (``apriltag``: the AprilTag 3 library; ``aruco``: OpenCV).
     backend: Literal["apriltag", "aruco"] = "apriltag"
     family: str = Field("tag36h11", min_length=1, max_length=64)
+
+    @field_validator("family")
+    @classmethod
+    def _known_family(cls, family: str) -> str:
+        if family not in known_families():
+            raise ValueError(f"unknown tag family {short_repr(family)}; known: {known_families()}")
+        return family
+
     #: One fix per tag (``single``) or one joint PnP fix per frame over >= 2 tags (``joint``).
     mode: Literal["single", "joint"] = "single"
     noise: NoiseModel = NoiseModel()

@@ -28,15 +28,15 @@ class OdometryNoise(StrictModel):
     legged drives that beat these defaults, 7.6 cm tag RMS against 9.8 cm.
     """
 
-    translation_var_per_m: float = Field(4e-3, ge=0.0, description="m^2 per metre")
-    translation_var_per_rad: float = Field(1e-4, ge=0.0, description="m^2 per radian")
-    rotation_var_per_m: float = Field(4e-4, ge=0.0, description="rad^2 per metre")
-    rotation_var_per_rad: float = Field(1e-4, ge=0.0, description="rad^2 per radian")
+    translation_var_per_m: float = Field(4e-3, ge=0.0, le=1e3, description="m^2 per metre")
+    translation_var_per_rad: float = Field(1e-4, ge=0.0, le=1e3, description="m^2 per radian")
+    rotation_var_per_m: float = Field(4e-4, ge=0.0, le=1e3, description="rad^2 per metre")
+    rotation_var_per_rad: float = Field(1e-4, ge=0.0, le=1e3, description="rad^2 per radian")
     vertical_factor: float = Field(
         0.1, gt=0.0, le=1.0, description="scales the z, roll and pitch sigmas"
     )
-    translation_floor_m: float = Field(1e-4, gt=0.0)
-    rotation_floor_rad: float = Field(1e-4, gt=0.0)
+    translation_floor_m: float = Field(1e-4, ge=1e-8, le=10.0)
+    rotation_floor_rad: float = Field(1e-4, ge=1e-8, le=3.2)
 
 
 class GravityConfig(StrictModel):
@@ -57,7 +57,7 @@ class GravityConfig(StrictModel):
     """
 
     priors: bool = True
-    sigma_deg: float = Field(1.0, gt=0.0, le=45.0)
+    sigma_deg: float = Field(1.0, ge=1e-3, le=45.0)
 
     @model_validator(mode="before")
     @classmethod
@@ -152,22 +152,22 @@ class MapBuildConfig(StrictModel):
     factors: Literal["corners", "pose"] = "corners"
     observation_covariance: Literal["pixel", "pnp"] = "pixel"
     robust: Literal["huber", "cauchy"] = "cauchy"
-    robust_k: float = Field(3.0, gt=0.0)
-    odometry_robust_k: float | None = Field(10.0, gt=0.0)
-    max_range_m: float = Field(10.0, gt=0.0)
+    robust_k: float = Field(3.0, gt=0.0, le=100.0)
+    odometry_robust_k: float | None = Field(10.0, gt=0.0, le=1e3)
+    max_range_m: float = Field(10.0, gt=0.0, le=1e3)
     max_ambiguity_for_init: float = Field(0.5, gt=0.0, le=1.0)
-    outlier_sigma: float = Field(6.0, gt=0.0)
+    outlier_sigma: float = Field(6.0, gt=0.0, le=1e3)
     disagreeing_fraction: float = Field(0.2, gt=0.0, le=1.0)
-    anchor_sigma_m: float = Field(1e-4, gt=0.0)
-    anchor_sigma_rad: float = Field(1e-5, gt=0.0)
-    max_iterations: int = Field(100, ge=1)
-    corner_max_iterations: int = Field(10, ge=1)
-    rounds: int = Field(2, ge=1)
+    anchor_sigma_m: float = Field(1e-4, ge=1e-8, le=10.0)
+    anchor_sigma_rad: float = Field(1e-5, ge=1e-9, le=3.2)
+    max_iterations: int = Field(100, ge=1, le=10_000)
+    corner_max_iterations: int = Field(10, ge=1, le=1000)
+    rounds: int = Field(2, ge=1, le=100)
     compute_covariance: bool = True
-    calibration_rounds: int = Field(0, ge=0)
+    calibration_rounds: int = Field(0, ge=0, le=100)
     joint_calibration: bool = False
-    calibration_sigma: float = Field(0.1, gt=0.0)
+    calibration_sigma: float = Field(0.1, ge=1e-9, le=10.0)
     odometry_frame: OdometryFrameConfig = OdometryFrameConfig()
     gravity: GravityConfig = GravityConfig()
-    uncertainty_flag_m: float = Field(0.05, gt=0.0)
+    uncertainty_flag_m: float = Field(0.05, gt=0.0, le=1e3)
     lidar: LidarSurveyConfig = LidarSurveyConfig()

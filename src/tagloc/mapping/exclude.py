@@ -3,8 +3,8 @@
 After reviewing a build (the QA report, the exported graph: :mod:`tagloc.mapping.graph_export`),
 a person removes what is wrong (a tag that was moved halfway through the survey, a stretch where
 a duplicate id was seen) and builds again. :func:`exclude_observations` is a pure filter on the
-:class:`~tagloc.mapping.survey.Survey`: detections go, camera frames and odometry stay (the
-odometry still links the keyframes on either side).
+:class:`~tagloc.mapping.survey.Survey`: detections go; camera frames, odometry and lidar sweeps
+stay (the odometry still links the keyframes on either side, the scans still match).
 
 Times are seconds from the survey start, :func:`survey_start_ns` (the first camera frame), the
 same origin as the exported graph's ``t_s``.
@@ -13,7 +13,7 @@ same origin as the exported graph's ``t_s``.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from tagloc.mapping.survey import CameraFrame, MappingError, Survey
 
@@ -79,14 +79,4 @@ def exclude_observations(survey: Survey, exclusions: Sequence[Exclusion]) -> Sur
         )
         frames.append(frame if len(kept) == len(frame.detections) else
                       CameraFrame(frame.stamp_ns, frame.camera, kept))  # fmt: skip
-    return Survey(
-        survey.odom_stamps_ns,
-        survey.T_odom_base,
-        tuple(frames),
-        survey.cameras,
-        survey.T_base_cam,
-        survey.tag_sizes,
-        survey.default_tag_size,
-        survey.ignore_tags,
-        survey.source,
-    )
+    return replace(survey, frames=tuple(frames))  # the lidar sweeps and every other field stay

@@ -43,8 +43,8 @@ class ProductsConfig(StrictModel):
         Resolution, height band, log-odds of the grid (:class:`tagloc.lidar.OccupancyConfig`).
     """
 
-    premap_voxel_m: float = Field(0.1, gt=0.0)
-    max_range_m: float = Field(20.0, gt=0.0)
+    premap_voxel_m: float = Field(0.1, ge=0.01, le=10.0)
+    max_range_m: float = Field(20.0, gt=0.0, le=1e4)
     occupancy: OccupancyConfig = OccupancyConfig()
 
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pydantic import Field, model_validator
 
-from tagloc.config import StrictModel
+from tagloc.config import FieldPathError, StrictModel
 
 __all__ = ["HealthConfig", "LadderConfig", "SupervisorConfig"]
 
@@ -21,6 +21,15 @@ class HealthConfig(StrictModel):
     timeout_s: float = Field(1.0, gt=0, le=3600)
     #: The input's nominal rate (Hz); the status reports the measured one beside it.
     expected_rate_hz: float = Field(30.0, gt=0, le=10_000)
+
+    @model_validator(mode="after")
+    def _timeout_above_period(self) -> HealthConfig:
+        if not self.timeout_s > 1.0 / self.expected_rate_hz:
+            raise FieldPathError(
+                ("timeout_s",),
+                f"must be above the period of expected_rate_hz ({1.0 / self.expected_rate_hz:g} s)",
+            )
+        return self
 
 
 class LadderConfig(StrictModel):
@@ -37,11 +46,11 @@ class LadderConfig(StrictModel):
     window: int = Field(20, ge=2, le=10_000)
     enter_acceptance: float = Field(0.2, ge=0, le=1)
     exit_acceptance: float = Field(0.5, ge=0, le=1)
-    enter_nis: float = Field(6.0, gt=0)
-    exit_nis: float = Field(3.0, gt=0)
+    enter_nis: float = Field(6.0, gt=0, le=1e6)
+    exit_nis: float = Field(3.0, gt=0, le=1e6)
     #: Mean RMS reprojection error (px) of the window's fixes that marks a source degraded.
-    enter_reproj_px: float = Field(1.5, gt=0)
-    exit_reproj_px: float = Field(1.0, gt=0)
+    enter_reproj_px: float = Field(1.5, gt=0, le=1e4)
+    exit_reproj_px: float = Field(1.0, gt=0, le=1e4)
     min_dwell_s: float = Field(30.0, ge=0, le=3600)
 
     @model_validator(mode="after")

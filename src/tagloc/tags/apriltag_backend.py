@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from tagloc.config import MAX_THREADS, short_repr
 from tagloc.tags.detection import APRILTAG3_ORDER, TagDetection
 from tagloc.tags.errors import TagBackendError, TagInputError
 from tagloc.tags.families import family_spec
@@ -101,13 +102,18 @@ class AprilTagDetector:
                 f"backend 'apriltag' cannot detect family {family!r}; it detects tag16h5, "
                 "tag25h9 and tag36h11 (use backend 'aruco' for ArUco dictionaries)"
             )
-        _check_real(quad_decimate, "quad_decimate", 1.0)
-        _check_real(quad_sigma, "quad_sigma", 0.0)
-        _check_real(decode_sharpening, "decode_sharpening", 0.0)
+        _check_real(quad_decimate, "quad_decimate", 1.0, 64.0)
+        _check_real(quad_sigma, "quad_sigma", 0.0, 100.0)
+        _check_real(decode_sharpening, "decode_sharpening", 0.0, 100.0)
         if not isinstance(refine_edges, (bool, np.bool_)):
             raise TagBackendError(f"option refine_edges: expected a bool, got {refine_edges!r}")
-        if isinstance(nthreads, bool) or not isinstance(nthreads, int) or nthreads < 1:
-            raise TagBackendError(f"option nthreads: expected an int >= 1, got {nthreads!r}")
+        if (
+            isinstance(nthreads, bool)
+            or not isinstance(nthreads, int)
+            or not 1 <= nthreads <= MAX_THREADS
+        ):
+            wanted = f"an int from 1 to {MAX_THREADS}"
+            raise TagBackendError(f"option nthreads: expected {wanted}, got {short_repr(nthreads)}")
 
         import pupil_apriltags
 
@@ -197,8 +203,9 @@ def release_pupil_detector(detector: Any) -> None:
     detector.tag_families = {}
 
 
-def _check_real(value: float, name: str, minimum: float) -> None:
+def _check_real(value: float, name: str, minimum: float, maximum: float) -> None:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise TagBackendError(f"option {name}: expected a number, got {value!r}")
-    if not (math.isfinite(value) and value >= minimum):
-        raise TagBackendError(f"option {name}: expected a finite number >= {minimum}, got {value}")
+        raise TagBackendError(f"option {name}: expected a number, got {short_repr(value)}")
+    if not minimum <= value <= maximum:  # NaN fails too
+        wanted = f"a number from {minimum:g} to {maximum:g}"
+        raise TagBackendError(f"option {name}: expected {wanted}, got {short_repr(value)}")

@@ -109,14 +109,14 @@ class ArucoTagDetector:
                 f"option corner_refinement: {corner_refinement!r} not one of {sorted(_REFINEMENT)}"
             )
         win = corner_refinement_win_size
-        if isinstance(win, bool) or not isinstance(win, int) or win < 1:
+        if isinstance(win, bool) or not isinstance(win, int) or not 1 <= win <= 100:
             raise TagBackendError(
-                f"option corner_refinement_win_size: expected an int >= 1, got {win!r}"
+                f"option corner_refinement_win_size: expected an int from 1 to 100, got {win!r}"
             )
         rel = relative_corner_refinement_win_size
-        if not _is_real(rel) or not (math.isfinite(rel) and rel > 0.0):
+        if not _is_real(rel) or not (math.isfinite(rel) and 0.0 < rel <= 1.0):
             raise TagBackendError(
-                f"option relative_corner_refinement_win_size: expected a number > 0, got {rel!r}"
+                f"option relative_corner_refinement_win_size: expected (0, 1], got {rel!r}"
             )
         rate = error_correction_rate
         if not _is_real(rate) or not 0.0 <= rate <= 1.0:

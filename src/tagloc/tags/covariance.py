@@ -44,7 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from pydantic import Field
+from pydantic import Field, field_validator
 
 from tagloc._types import FloatArray
 from tagloc.config import StrictModel
@@ -55,6 +55,10 @@ _EPS = np.zeros((3, 3, 3))
 _EPS[0, 1, 2] = _EPS[1, 2, 0] = _EPS[2, 0, 1] = 1.0
 _EPS[0, 2, 1] = _EPS[2, 1, 0] = _EPS[1, 0, 2] = -1.0
 _EPS9 = _EPS.reshape(3, 9)  # (i, jk)
+
+
+#: Smallest corner noise accepted, px.
+MIN_SIGMA_PX = 1e-3
 
 
 class NoiseModel(StrictModel):
@@ -78,13 +82,20 @@ class NoiseModel(StrictModel):
         Add the ``phi x rho`` term (step 3 of the module docstring); default True.
     """
 
-    sigma_px: float = Field(0.5, gt=0.0)
-    view_angle_gain: float = Field(0.05, ge=0.0)
-    corner_bias_px: float = Field(0.1, ge=0.0)
-    scale_rel: float = Field(0.002, ge=0.0)
-    floor_translation_m: float = Field(0.0003, ge=0.0)
-    floor_rotation_rad: float = Field(0.0005, ge=0.0)
+    sigma_px: float = Field(0.5, gt=0.0, le=100.0)
+    view_angle_gain: float = Field(0.05, ge=0.0, le=100.0)
+    corner_bias_px: float = Field(0.1, ge=0.0, le=100.0)
+    scale_rel: float = Field(0.002, ge=0.0, le=1.0)
+    floor_translation_m: float = Field(0.0003, ge=0.0, le=100.0)
+    floor_rotation_rad: float = Field(0.0005, ge=0.0, le=3.2)
     second_order: bool = True
+
+    @field_validator("sigma_px")
+    @classmethod
+    def _sigma_floor(cls, sigma_px: float) -> float:
+        if sigma_px < MIN_SIGMA_PX:  # its inverse square would overflow the information
+            raise ValueError(f"must be at least {MIN_SIGMA_PX:g} px, got {sigma_px:g}")
+        return sigma_px
 
 
 def _sym(cov: FloatArray) -> FloatArray:

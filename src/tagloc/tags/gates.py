@@ -108,13 +108,13 @@ class GateConfig(BaseModel):
     # from this class, an order that cannot hold if this class were a StrictModel too.
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
-    max_reproj_err_px: float = Field(2.0, gt=0.0)
-    max_range_m: float = Field(8.0, gt=0.0)
+    max_reproj_err_px: float = Field(2.0, gt=0.0, le=1e4)
+    max_range_m: float = Field(8.0, gt=0.0, le=1e4)
     max_view_angle_deg: float = Field(75.0, gt=0.0, le=90.0)
-    min_decision_margin: float = Field(20.0, ge=0.0)
-    max_hamming: int = Field(1, ge=0)
-    ambiguity_log_odds: float = Field(18.4, ge=0.0)
-    prior_gate_chi2: float = Field(16.3, gt=0.0)
+    min_decision_margin: float = Field(20.0, ge=0.0, le=1e4)
+    max_hamming: int = Field(1, ge=0, le=16)
+    ambiguity_log_odds: float = Field(18.4, ge=0.0, le=1e6)
+    prior_gate_chi2: float = Field(16.3, gt=0.0, le=1e9)
 
 
 @dataclass(frozen=True, slots=True)
