@@ -29,6 +29,16 @@ class LidarSurveyConfig(BaseModel):
         (default None: kept). Measured on the simulated loop corridor, the consecutive
         registrations overestimate each 0.75 m step by 2.4 mm and pitch by -2.5 mrad with the
         floor, by 3.1 mm and -3.0 mrad without it: the floor is not what biases them.
+    local_map_m : float
+        Each keyframe is registered onto a local map of the keyframes over this much travel
+        before it (:mod:`tagloc.lidar.local_map`); a loop closure onto the keyframes within half
+        of it around the earlier visit. Static check on noise-free 16-ring sweeps 0.75 m apart
+        in a corridor (``tests/lidar/test_local_map.py``): the previous scan alone overestimates
+        each step by 0.15-0.2 % with -2.7 mrad of pitch; a map of 15 m leaves < 0.1 % and 0.1
+        mrad.
+    local_map_every : int
+        The local map is rebuilt every this many keyframes (each rebuild costs a KD-tree and
+        the covariances of some 20 000 points); the keyframes in between register onto it.
     max_correspondence_m : float
         Registration: largest point-to-point distance of a correspondence.
     min_inlier_fraction, max_rmse_m : float
@@ -73,6 +83,8 @@ class LidarSurveyConfig(BaseModel):
     voxel_m: float = Field(0.15, gt=0.0)
     max_range_m: float = Field(20.0, gt=0.0)
     min_height_m: float | None = None
+    local_map_m: float = Field(15.0, gt=0.0)
+    local_map_every: int = Field(3, ge=1)
     max_correspondence_m: float = Field(0.5, gt=0.0)
     min_inlier_fraction: float = Field(0.5, ge=0.0, le=1.0)
     max_rmse_m: float = Field(0.1, gt=0.0)

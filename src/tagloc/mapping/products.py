@@ -24,7 +24,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from tagloc.geometry import SE3
 from tagloc.lidar import OccupancyConfig, OccupancyGrid, build_occupancy, build_premap
 from tagloc.mapping.lidar_config import LidarSurveyConfig
-from tagloc.mapping.lidar_survey import deskewed_points
+from tagloc.mapping.lidar_sweeps import deskewed_points
 from tagloc.mapping.report import BuildReport
 from tagloc.mapping.survey import MappingError, Survey
 
