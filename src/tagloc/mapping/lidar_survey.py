@@ -160,8 +160,8 @@ class LidarKeyframes:
     def loops(self, M_map_base: FloatArray) -> RelativePoseFactors:
         """Loop closures at the estimate ``M_map_base`` (step 3 of the module docstring): each
         onto the local map around the earlier visit (the keyframes within ``local_map_m / 2``
-        of travel of it, at the estimate), in the frame of a keyframe on a ``local_map_every``
-        grid (so neighbouring closures share one map)."""
+        of travel of it, at the estimate), in the frame of a keyframe on a grid of
+        ``2 * local_map_every`` keyframes (so neighbouring closures share one map)."""
         c = self.config
         xy = M_map_base[self.keyframe, :2, 3]
         M_lidar = M_map_base[self.keyframe] @ self.M_base_lidar
@@ -171,7 +171,7 @@ class LidarKeyframes:
             dist = np.linalg.norm(xy - xy[j], axis=1)
             candidates = np.flatnonzero(far & (dist <= c.loop_radius_m))
             for i in candidates[np.argsort(dist[candidates])][: c.loops_per_keyframe]:
-                r = int(i) - int(i) % c.local_map_every
+                r = int(i) - int(i) % (2 * c.local_map_every)
                 if r not in maps:
                     near = np.abs(self.travelled_m - self.travelled_m[r]) <= 0.5 * c.local_map_m
                     near &= self.travelled_m[j] - self.travelled_m >= 0.5 * c.loop_min_travel_m
