@@ -78,7 +78,7 @@ from tagloc.mapping.map_qa import graph_records, map_and_report
 from tagloc.mapping.observations import Observations, collect_observations
 from tagloc.mapping.refine import Priors, State, refine_and_test_tilts
 from tagloc.mapping.report import BuildReport
-from tagloc.mapping.scan_factors import RelativePoseFactors
+from tagloc.mapping.scan_factors import RelativePoseFactors, scan_scale
 from tagloc.mapping.survey import MappingError, Survey, TagKey
 from tagloc.tags.tagmap import DEFAULT_FAMILY, TagMap
 
@@ -299,8 +299,13 @@ def build_tag_map(
     object.__setattr__(report, "timings_s", timings)
     object.__setattr__(report, "iterations", iterations)
     object.__setattr__(report, "error_initial", error_initial)
+    scale = {"odometry": float(state.c[0])}
     if lidar is not None:
         object.__setattr__(report, "scan_matching", scans.stats.as_dict())
+        if relative is not None:
+            s, sigma = scan_scale(solution.M_map_base, relative)
+            scale |= {"scan_matching": s, "scan_matching_sigma": sigma}
+    object.__setattr__(report, "scale", scale)
     return tag_map, report
 
 
