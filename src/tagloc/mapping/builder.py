@@ -73,7 +73,7 @@ from tagloc.mapping.initialize import (
     initialize_tags,
     inverse_h,
 )
-from tagloc.mapping.lidar_survey import prepare_lidar, scan_odometry
+from tagloc.mapping.lidar_survey import prepare_lidar, scan_odometry, sequential_factors
 from tagloc.mapping.map_qa import graph_records, map_and_report
 from tagloc.mapping.observations import Observations, collect_observations
 from tagloc.mapping.refine import Priors, State, refine_and_test_tilts
@@ -185,7 +185,9 @@ def build_tag_map(
         timings["lidar_keyframes"] = time.perf_counter() - t
         # consecutive registrations from the odometry; the scan-corrected odometry initializes
         t = time.perf_counter()
-        relative = scans.sequential(obs.T_odom_base.as_matrix().reshape(-1, 4, 4))
+        scans, relative = sequential_factors(
+            survey, scans, obs.T_odom_base.as_matrix().reshape(-1, 4, 4)
+        )
         obs_init = replace(obs, T_odom_base=scan_odometry(obs, relative, config))
         timings["scan_matching"] = time.perf_counter() - t
     # 2. initial values

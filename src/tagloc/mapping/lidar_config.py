@@ -17,6 +17,10 @@ class LidarSurveyConfig(BaseModel):
     keyframe_distance_m, keyframe_turn_deg : float
         A sweep becomes a lidar keyframe (a pose variable of the graph) after this much travel
         or turn of the odometry since the last one.
+    deskew_passes : int
+        1: sweeps de-skewed with the odometry; 2: registered, then de-skewed again with the
+        odometry's velocity corrected by the scan matching, and registered again
+        (:func:`tagloc.mapping.lidar_survey.sequential_factors` says why).
     deskew_window_s : float
         Sweeps are de-skewed at the odometry's mean velocity over this window around them
         (:func:`tagloc.mapping.lidar_survey.sweep_motion` says why).
@@ -69,6 +73,13 @@ class LidarSurveyConfig(BaseModel):
         held loosely, the tags set the map's scale instead (office survey, one anchor, seeds
         1 and 2: 3.9 and 1.5 cm tag RMS at 5 mm, 2.4 and 2.4 cm at 2 cm, 2.6 cm (seed 1) at
         4 cm).
+    min_sigma_tilt_rad : float
+        The floor on roll and pitch (instead of ``min_sigma_rad``). A level sweep's roll and
+        pitch lean on the floor and the rings' sampling of the walls: with 2 cm of range noise
+        and the odometry's de-skew, consecutive registrations onto local maps still pitch each
+        0.75 m step by about -1.3 mrad on the simulated loop corridor (0.05 mrad without noise),
+        which tilts a survey's far end by centimetres; a floor robot's odometry (or gravity)
+        knows its tilt better.
     kernel : {"huber", "cauchy"}
     robust_k : float
         Robust kernel on every scan-matching factor, width in sigmas.
@@ -80,6 +91,7 @@ class LidarSurveyConfig(BaseModel):
     keyframe_distance_m: float = Field(0.75, gt=0.0)
     keyframe_turn_deg: float = Field(20.0, gt=0.0)
     deskew_window_s: float = Field(0.2, gt=0.0)
+    deskew_passes: int = Field(2, ge=1, le=2)
     voxel_m: float = Field(0.15, gt=0.0)
     max_range_m: float = Field(20.0, gt=0.0)
     min_height_m: float | None = None
@@ -97,5 +109,6 @@ class LidarSurveyConfig(BaseModel):
     information_scale: float = Field(0.5, gt=0.0)
     min_sigma_m: float = Field(0.02, gt=0.0)
     min_sigma_rad: float = Field(0.003, gt=0.0)
+    min_sigma_tilt_rad: float = Field(0.01, gt=0.0)
     kernel: Literal["huber", "cauchy"] = "cauchy"
     robust_k: float = Field(3.0, gt=0.0)

@@ -24,7 +24,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from tagloc.geometry import SE3
 from tagloc.lidar import OccupancyConfig, OccupancyGrid, build_occupancy, build_premap
 from tagloc.mapping.lidar_config import LidarSurveyConfig
-from tagloc.mapping.lidar_sweeps import deskewed_points
+from tagloc.mapping.lidar_sweeps import deskewed_points, scan_velocity
 from tagloc.mapping.report import BuildReport
 from tagloc.mapping.survey import MappingError, Survey
 
@@ -84,8 +84,12 @@ def placed_scans(
             f"{survey.source}: the map was built without lidar: no premap or occupancy grid"
         )
     T_map_lidar = report.T_map_base_optimized[index[on_keyframe]] @ scans.T_base_lidar
+    # de-skewed with the velocity of the optimized poses (as the scan matching's second pass:
+    # tagloc.mapping.lidar_survey.sequential_factors)
+    velocity = scan_velocity(T_map_lidar.as_matrix(), scans.stamps_ns[on_keyframe] / 1e9)
     return [
-        (T_map_lidar[i], deskewed_points(survey, int(s), window)) for i, s in enumerate(on_keyframe)
+        (T_map_lidar[i], deskewed_points(survey, int(s), window, velocity[i]))
+        for i, s in enumerate(on_keyframe)
     ]
 
 
