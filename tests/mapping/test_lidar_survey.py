@@ -26,13 +26,14 @@ from tagloc.messages import OdometryMsg, PointCloudMsg, TagDetectionsMsg, Transf
 from tagloc.sim import Drive, ObservationConfig, load_default_world, simulate_drive
 from tagloc.sim.survey import MapErrors, map_errors, sim_build_config, survey_and_anchors
 from tagloc.sim.trajectory import se3_from_xy_yaw
+from tagloc.sim.world import BUILTIN_WORLDS, load_builtin_world
 from tagloc.tags.tagmap import TagMap
 
 
 @cache
 def _drive(world_name: str, seed: int) -> Drive:
-    world = {"rooms": room_loop_world, "office": load_default_world,
-             "sparse": sparse_tag_world}[world_name]()  # fmt: skip
+    worlds = {"rooms": room_loop_world, "office": load_default_world, "sparse": sparse_tag_world}
+    world = worlds[world_name]() if world_name in worlds else load_builtin_world(world_name)
     return simulate_drive(world, seed=seed)
 
 
@@ -64,6 +65,12 @@ def test_short_survey_with_lidar_beats_tags_only() -> None:
     # measured (seed 3): tags only 8.0 cm, with lidar 3.2 cm
     assert with_lidar.position_rms_m < 0.5 * tags_only.position_rms_m
     assert with_lidar.position_rms_m < 0.045
+    # the report states the scales it found: the registrations agree with the map's scale
+    scale = report.scale
+    assert scale["scan_matching_sigma"] > 0.0
+    assert abs(scale["scan_matching"]) < max(4.0 * scale["scan_matching_sigma"], 0.003), scale
+    assert any(line.startswith("scale: odometry corrected by") and "scan matching" in line
+               for line in report.summary_lines())  # fmt: skip
 
 
 def test_the_exported_graph_holds_every_scan_match_with_its_residual() -> None:

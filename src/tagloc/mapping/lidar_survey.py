@@ -53,7 +53,7 @@ from tagloc.mapping.gtsam_bridge import diagonal_sigmas, solver_errors
 from tagloc.mapping.initialize import inverse_h
 from tagloc.mapping.lidar_config import LidarSurveyConfig
 from tagloc.mapping.lidar_keyframes import choose_lidar_keyframes, with_keyframes
-from tagloc.mapping.lidar_sweeps import keyframe_points, scan_velocity
+from tagloc.mapping.lidar_sweeps import keyframe_points, scan_velocity, steady_keyframes
 from tagloc.mapping.observations import Observations
 from tagloc.mapping.odometry_factors import adjoint
 from tagloc.mapping.scan_factors import (
@@ -293,17 +293,18 @@ def sequential_factors(
     (0.3 deg/m of yaw drift is 4 mrad/s at 0.8 m/s, a distance scale of a few %) skew every
     sweep the same way, and the registrations inherit it as a bias (simulated loop corridor:
     0.27 mrad of yaw per 0.75 m step, a bend of the map; 0.15 with the true motion). With
-    ``deskew_passes`` 2, each sweep where the robot goes straight (less than
-    :data:`STEADY_TURN_RAD` between any two of the five keyframes around it) is de-skewed again
-    with the scanner's velocity from the scan-matched poses of its neighbours
+    ``deskew_passes`` 2, each sweep where the robot goes straight
+    (:func:`~tagloc.mapping.lidar_sweeps.steady_keyframes`) is de-skewed again with the
+    scanner's velocity from the scan-matched poses of its neighbours
     (:func:`~tagloc.mapping.lidar_sweeps.scan_velocity`: a mean over two steps, too coarse for a
-    turn, where the odometry's own velocity stays), and all are registered again.
+    turn, where the odometry's own velocity stays), and all are registered again
+    (the loop corridor: 0.04 mrad of yaw per step).
     """
     factors, placed = scans.chain(M_map_base)
     if scans.config.deskew_passes > 1 and len(scans) > 2 and survey.lidar is not None:
         stamps_s = survey.lidar.stamps_ns[scans.sweep].astype(np.float64) / 1e9
         velocity = scan_velocity(placed, stamps_s)
-        steady = _steady(placed)
+        steady = steady_keyframes(placed)
         points = tuple(
             keyframe_points(survey, int(s), scans.config, velocity[i] if steady[i] else None)
             for i, s in enumerate(scans.sweep)
@@ -313,20 +314,6 @@ def sequential_factors(
     scans.stats.sequential += len(factors)
     scans.stats.sequential_rejected += len(scans) - 1 - len(factors)
     return scans, factors
-
-
-#: Yaw (rad) between consecutive keyframes below which the robot goes straight (3 deg).
-STEADY_TURN_RAD = 0.05
-
-
-def _steady(M: FloatArray) -> npt.NDArray[np.bool_]:
-    """``(L,)`` keyframes whose four steps around them (two either side) turn less than
-    :data:`STEADY_TURN_RAD` each."""
-    R = np.einsum("nji,njk->nik", M[:-1, :3, :3], M[1:, :3, :3])
-    turn = np.abs(np.arctan2(R[:, 1, 0], R[:, 0, 0]))
-    padded = np.concatenate([[np.inf, np.inf], turn, [np.inf, np.inf]])
-    windows = np.lib.stride_tricks.sliding_window_view(padded, 4)[: len(M)]
-    return np.asarray(windows.max(axis=1) < STEADY_TURN_RAD)
 
 
 def scan_odometry(

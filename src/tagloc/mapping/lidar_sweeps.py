@@ -94,3 +94,17 @@ def scan_velocity(M_scan: FloatArray, stamps_s: FloatArray) -> FloatArray:
     dt = np.maximum(stamps_s[after] - stamps_s[before], 1e-3)[:, None]
     step = SE3.from_matrix(inverse_h(M_scan[before]) @ M_scan[after], normalize=True).log()
     return np.asarray(step / dt, dtype=np.float64)
+
+
+#: Yaw (rad) between consecutive keyframes below which the robot goes straight (3 deg).
+STEADY_TURN_RAD = 0.05
+
+
+def steady_keyframes(M: FloatArray) -> npt.NDArray[np.bool_]:
+    """``(L,)`` keyframes whose four steps around them (two either side) turn less than
+    :data:`STEADY_TURN_RAD` each."""
+    R = np.einsum("nji,njk->nik", M[:-1, :3, :3], M[1:, :3, :3])
+    turn = np.abs(np.arctan2(R[:, 1, 0], R[:, 0, 0]))
+    padded = np.concatenate([[np.inf, np.inf], turn, [np.inf, np.inf]])
+    windows = np.lib.stride_tricks.sliding_window_view(padded, 4)[: len(M)]
+    return np.asarray(windows.max(axis=1) < STEADY_TURN_RAD)

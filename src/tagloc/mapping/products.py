@@ -24,7 +24,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from tagloc.geometry import SE3
 from tagloc.lidar import OccupancyConfig, OccupancyGrid, build_occupancy, build_premap
 from tagloc.mapping.lidar_config import LidarSurveyConfig
-from tagloc.mapping.lidar_sweeps import deskewed_points, scan_velocity
+from tagloc.mapping.lidar_sweeps import deskewed_points, scan_velocity, steady_keyframes
 from tagloc.mapping.report import BuildReport
 from tagloc.mapping.survey import MappingError, Survey
 
@@ -84,11 +84,14 @@ def placed_scans(
             f"{survey.source}: the map was built without lidar: no premap or occupancy grid"
         )
     T_map_lidar = report.T_map_base_optimized[index[on_keyframe]] @ scans.T_base_lidar
-    # de-skewed with the velocity of the optimized poses (as the scan matching's second pass:
-    # tagloc.mapping.lidar_survey.sequential_factors)
-    velocity = scan_velocity(T_map_lidar.as_matrix(), scans.stamps_ns[on_keyframe] / 1e9)
+    # de-skewed where the robot goes straight with the velocity of the optimized poses (as the
+    # scan matching's second pass: tagloc.mapping.lidar_survey.sequential_factors)
+    M_map_lidar = T_map_lidar.as_matrix()
+    velocity = scan_velocity(M_map_lidar, scans.stamps_ns[on_keyframe] / 1e9)
+    steady = steady_keyframes(M_map_lidar)
+    chosen = [velocity[i] if steady[i] else None for i in range(len(on_keyframe))]
     return [
-        (T_map_lidar[i], deskewed_points(survey, int(s), window, velocity[i]))
+        (T_map_lidar[i], deskewed_points(survey, int(s), window, chosen[i]))
         for i, s in enumerate(on_keyframe)
     ]
 
