@@ -45,7 +45,7 @@ def main() -> None:
     world = load_default_world()
     drive = simulate_drive(world, seed=seed)
     observations = ObservationConfig(seed=seed)
-    config = sim_build_config(drive, observations)
+    config = sim_build_config(drive, observations, gravity_aligned=True)
     rows: list[tuple[str, float, str]] = []
     scan_to_scan = config.lidar.model_copy(update={"local_map_m": 0.0, "local_map_every": 1})
     cases = [("tags only", False, config),

@@ -26,7 +26,7 @@ from tagloc.messages import OdometryMsg, PointCloudMsg, TagDetectionsMsg, Transf
 from tagloc.sim import Drive, ObservationConfig, load_default_world, simulate_drive
 from tagloc.sim.survey import MapErrors, map_errors, sim_build_config, survey_and_anchors
 from tagloc.sim.trajectory import se3_from_xy_yaw
-from tagloc.sim.world import BUILTIN_WORLDS, load_builtin_world
+from tagloc.sim.world import load_builtin_world
 from tagloc.tags.tagmap import TagMap
 
 
@@ -47,7 +47,7 @@ def _survey(world_name: str, seed: int, lidar: bool, stride: int = 3) -> tuple[S
 def _built(world_name: str, seed: int, lidar: bool) -> tuple[TagMap, BuildReport, MapErrors]:
     drive = _drive(world_name, seed)
     survey, anchors = _survey(world_name, seed, lidar)
-    config = sim_build_config(drive, ObservationConfig(seed=seed))
+    config = sim_build_config(drive, ObservationConfig(seed=seed), gravity_aligned=lidar)
     tag_map, report = build_tag_map(survey, anchors, config)
     return tag_map, report, map_errors(tag_map, drive.world)
 
