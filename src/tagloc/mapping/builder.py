@@ -73,12 +73,13 @@ from tagloc.mapping.initialize import (
     initialize_tags,
     inverse_h,
 )
-from tagloc.mapping.lidar_survey import prepare_lidar, scan_odometry, sequential_factors
+from tagloc.mapping.lidar_survey import prepare_lidar, sequential_factors
 from tagloc.mapping.map_qa import graph_records, map_and_report
 from tagloc.mapping.observations import Observations, collect_observations
 from tagloc.mapping.refine import Priors, State, refine_and_test_tilts
 from tagloc.mapping.report import BuildReport
 from tagloc.mapping.scan_factors import RelativePoseFactors, scan_scale
+from tagloc.mapping.scan_odometry import scan_odometry
 from tagloc.mapping.survey import MappingError, Survey, TagKey
 from tagloc.tags.tagmap import DEFAULT_FAMILY, TagMap
 
