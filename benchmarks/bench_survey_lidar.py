@@ -8,7 +8,8 @@ drive:
 
 1. tags only (``--no-lidar``): the reference;
 2. lidar-aided with each scan registered onto the previous one alone (scan-to-scan, as before
-   the local maps: ``local_map_m`` 0): the reference the lidar-aided build is held to;
+   the local maps and with one de-skew: ``local_map_m`` 0, ``deskew_passes`` 1): the reference
+   the lidar-aided build is held to;
 3. lidar-aided: keyframe scans (de-skew), registrations onto local maps (small_gicp), the pose
    rounds and the corner refinement with the scan factors, then the premap and the occupancy
    grid;
@@ -47,7 +48,9 @@ def main() -> None:
     observations = ObservationConfig(seed=seed)
     config = sim_build_config(drive, observations, gravity_aligned=True)
     rows: list[tuple[str, float, str]] = []
-    scan_to_scan = config.lidar.model_copy(update={"local_map_m": 0.0, "local_map_every": 1})
+    scan_to_scan = config.lidar.model_copy(
+        update={"local_map_m": 0.0, "local_map_every": 1, "deskew_passes": 1}
+    )
     cases = [("tags only", False, config),
              ("lidar-aided, scan-to-scan (before)", True,
               config.model_copy(update={"lidar": scan_to_scan})),
