@@ -108,7 +108,7 @@ def survey_and_build(
         drive, observation_config, list(anchors) if anchors else None, SURVEY_CAMERA_STRIDE,
         lidar=lidar,
     )  # fmt: skip
-    config = sim_build_config(drive, observation_config)
+    config = sim_build_config(drive, observation_config, gravity_aligned=lidar)
     tag_map, report = build_tag_map(survey, T_map_anchor, config)
     texts = {out / "tags.yaml": tag_map.to_yaml_text(), out / "map_report.md": report.to_markdown()}
     iou, premap = None, None

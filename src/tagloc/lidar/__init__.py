@@ -5,6 +5,7 @@ premap. Pure: no file I/O (PLY/PCD and map_server files are in :mod:`tagloc.io`)
 - :mod:`tagloc.lidar.cloud`: :func:`finite_points`, :func:`deskew`, :func:`voxel_downsample`.
 - :mod:`tagloc.lidar.registration`: :class:`RegistrationConfig`, :class:`Target`,
   :class:`Registration`, :func:`register`.
+- :mod:`tagloc.lidar.local_map`: :func:`merge_scans`, :func:`local_map_target` (scan-to-map).
 - :mod:`tagloc.lidar.degeneracy`: :class:`DegeneracyConfig`, :class:`Degeneracy`,
   :func:`analyse_hessian`.
 - :mod:`tagloc.lidar.fix`: :class:`LidarFixConfig`, :class:`LidarFix`, :func:`lidar_fix`.
@@ -15,6 +16,7 @@ premap. Pure: no file I/O (PLY/PCD and map_server files are in :mod:`tagloc.io`)
 from tagloc.lidar.cloud import deskew, finite_points, voxel_downsample
 from tagloc.lidar.degeneracy import Degeneracy, DegeneracyConfig, analyse_hessian
 from tagloc.lidar.fix import LidarFix, LidarFixConfig, lidar_fix
+from tagloc.lidar.local_map import local_map_target, merge_scans
 from tagloc.lidar.occupancy import OccupancyConfig, OccupancyGrid, build_occupancy, build_premap
 from tagloc.lidar.registration import Registration, RegistrationConfig, Target, register
 
@@ -34,6 +36,8 @@ __all__ = [
     "deskew",
     "finite_points",
     "lidar_fix",
+    "local_map_target",
+    "merge_scans",
     "register",
     "voxel_downsample",
 ]

@@ -73,12 +73,13 @@ from tagloc.mapping.initialize import (
     initialize_keyframes,
     initialize_tags,
 )
-from tagloc.mapping.lidar_survey import prepare_lidar, scan_odometry
+from tagloc.mapping.lidar_survey import prepare_lidar, sequential_factors
 from tagloc.mapping.map_qa import graph_records, map_and_report
 from tagloc.mapping.observations import Observations, collect_observations
 from tagloc.mapping.refine import Priors, State, refine_and_test_tilts
 from tagloc.mapping.report import BuildReport
-from tagloc.mapping.scan_factors import RelativePoseFactors
+from tagloc.mapping.scan_factors import RelativePoseFactors, scan_scale
+from tagloc.mapping.scan_odometry import scan_odometry
 from tagloc.mapping.survey import MappingError, Survey, TagKey
 from tagloc.tags.tagmap import DEFAULT_FAMILY, TagMap
 
@@ -186,7 +187,9 @@ def build_tag_map(
         timings["lidar_keyframes"] = time.perf_counter() - t
         # consecutive registrations from the odometry; the scan-corrected odometry initializes
         t = time.perf_counter()
-        relative = scans.sequential(obs.T_odom_base.as_matrix().reshape(-1, 4, 4))
+        scans, relative = sequential_factors(
+            survey, scans, obs.T_odom_base.as_matrix().reshape(-1, 4, 4)
+        )
         obs_init = replace(obs, T_odom_base=scan_odometry(obs, relative, config))
         timings["scan_matching"] = time.perf_counter() - t
     # 2. initial values
@@ -312,8 +315,13 @@ def build_tag_map(
     object.__setattr__(report, "timings_s", timings)
     object.__setattr__(report, "iterations", iterations)
     object.__setattr__(report, "error_initial", error_initial)
+    scale = {"odometry": float(state.c[0])}
     if lidar is not None:
         object.__setattr__(report, "scan_matching", scans.stats.as_dict())
+        if relative is not None:
+            s, sigma = scan_scale(solution.M_map_base, relative)
+            scale |= {"scan_matching": s, "scan_matching_sigma": sigma}
+    object.__setattr__(report, "scale", scale)
     return tag_map, report
 
 

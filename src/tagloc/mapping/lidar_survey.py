@@ -4,14 +4,17 @@ Steps (called by :func:`tagloc.mapping.build_tag_map` when the survey has sweeps
 
 1. :func:`prepare_lidar`: a sweep every ``keyframe_distance_m`` of odometry becomes a keyframe
    of the graph (:mod:`tagloc.mapping.lidar_keyframes` says why), de-skewed with the odometry
-   (:func:`tagloc.lidar.deskew`), cut to ``max_range_m``, downsampled, and prepared once as a
-   registration target (:class:`tagloc.lidar.Target`: covariances, KD-tree);
-2. :meth:`LidarKeyframes.sequential`: each keyframe's scan registered (small_gicp GICP) onto the
-   previous one's, from the odometry's relative pose;
+   (:func:`tagloc.lidar.deskew`), cut to ``max_range_m`` and downsampled
+   (:mod:`tagloc.mapping.lidar_sweeps`);
+2. :meth:`LidarKeyframes.sequential`: each keyframe's scan registered (small_gicp GICP) onto a
+   *local map* of the keyframes before it (the last ``local_map_m`` of travel, placed by the
+   registrations so far; :mod:`tagloc.lidar.local_map` says why not onto the previous scan
+   alone: that is biased by the ring sampling, a scale error of the whole map), from the
+   odometry's relative pose;
 3. :meth:`LidarKeyframes.loops` (after the first optimization): keyframes within
    ``loop_radius_m`` of each other in the current estimate that the robot reached at least
-   ``loop_min_travel_m`` apart along its path are registered too, from the estimate's relative
-   pose: loop closures.
+   ``loop_min_travel_m`` apart along its path are registered too, each onto the local map
+   around the earlier visit, from the estimate's relative pose: loop closures.
 
 Each accepted registration (inlier fraction and point-to-plane RMS gated) becomes a relative-pose
 factor (:mod:`tagloc.mapping.scan_factors`). Its information is that of the lidar fix
@@ -28,10 +31,8 @@ is moved from the scanner's tangent to the base's by the mount's adjoint: with
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
-import gtsam
 import numpy as np
 import numpy.typing as npt
 
@@ -42,23 +43,17 @@ from tagloc.lidar import (
     RegistrationConfig,
     Target,
     analyse_hessian,
-    deskew,
-    finite_points,
+    local_map_target,
     register,
-    voxel_downsample,
 )
-from tagloc.mapping.config import MapBuildConfig
-from tagloc.mapping.graph import X, lm_params
-from tagloc.mapping.gtsam_bridge import solver_errors
 from tagloc.mapping.initialize import inverse_h
 from tagloc.mapping.lidar_config import LidarSurveyConfig
 from tagloc.mapping.lidar_keyframes import choose_lidar_keyframes, with_keyframes
-from tagloc.mapping.observations import Observations, interpolate_odometry
+from tagloc.mapping.lidar_sweeps import keyframe_points, scan_velocity, steady_keyframes
+from tagloc.mapping.observations import Observations
 from tagloc.mapping.odometry_factors import adjoint
-from tagloc.mapping.odometry_noise import odometry_whitening
 from tagloc.mapping.scan_factors import (
     RelativePoseFactors,
-    add_relative_factors,
     sqrt_information,
 )
 from tagloc.mapping.survey import Survey
@@ -66,7 +61,6 @@ from tagloc.mapping.survey import Survey
 logger = logging.getLogger(__name__)
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
-S_NS = 1_000_000_000
 
 
 @dataclass(slots=True)
@@ -93,7 +87,7 @@ class LidarStats:
 
 @dataclass(frozen=True, slots=True, eq=False)
 class LidarKeyframes:
-    """The keyframe scans of a survey, prepared for registration.
+    """The keyframe scans of a survey, prepared for scan-to-map registration.
 
     Attributes
     ----------
@@ -103,9 +97,9 @@ class LidarKeyframes:
         Index of its sweep in ``survey.lidar``.
     points_lidar : tuple of L (N_i, 3) float
         De-skewed (to the sweep's stamp), in range, downsampled; scanner frame.
-    targets : tuple of L Target
     travelled_m : (L,) float
-        Odometry path length at each keyframe (to tell loops from neighbours).
+        Odometry path length at each keyframe (to tell loops from neighbours, and to choose the
+        keyframes of a local map).
     M_base_lidar : (4, 4) float
     config : LidarSurveyConfig
     stats : LidarStats
@@ -114,7 +108,6 @@ class LidarKeyframes:
     keyframe: IntArray
     sweep: IntArray
     points_lidar: tuple[FloatArray, ...]
-    targets: tuple[Target, ...]
     travelled_m: FloatArray
     M_base_lidar: FloatArray
     config: LidarSurveyConfig
@@ -128,65 +121,98 @@ class LidarKeyframes:
         return RegistrationConfig(voxel_m=c.voxel_m, max_correspondence_m=c.max_correspondence_m)
 
     def sequential(self, M_map_base: FloatArray) -> RelativePoseFactors:
-        """Each keyframe's scan onto the previous one's, from ``M_map_base``'s relative pose
-        (the odometry's, at the start)."""
-        pairs = [(i - 1, i) for i in range(1, len(self))]
-        factors = self._register_pairs(pairs, M_map_base, loop=False)
+        """Each keyframe's scan onto the local map of the keyframes before it (step 2 of the
+        module docstring), from ``M_map_base``'s relative poses (the odometry's, at the start).
+
+        The map is built every ``local_map_every`` keyframes, in the frame of its newest
+        keyframe ``r``, from the keyframes up to ``local_map_m`` of travel before ``r``, placed
+        at their scan-matched poses so far; keyframes ``r + 1 .. r + local_map_every`` are
+        registered onto it (factors ``(r, i)``) and placed by it.
+        """
+        factors, _ = self.chain(M_map_base)
         self.stats.sequential += len(factors)
-        self.stats.sequential_rejected += len(pairs) - len(factors)
+        self.stats.sequential_rejected += len(self) - 1 - len(factors)
         return factors
 
+    def chain(self, M_map_base: FloatArray) -> tuple[RelativePoseFactors, FloatArray]:
+        """:meth:`sequential`'s factors and the scanner poses they place the keyframes at
+        (``(L, 4, 4)``, in ``M_map_base``'s frame; a rejected registration leaves the guess);
+        no counts in :attr:`stats` but the registrations."""
+        c, E = self.config, self.M_base_lidar
+        M_lidar = M_map_base[self.keyframe] @ E  # initial guesses (map frame, scanner)
+        placed = M_lidar.copy()  # scan-matched chain, in the same frame
+        steps = inverse_h(M_lidar[:-1]) @ M_lidar[1:]
+        found = _Found()
+        r, target = -1, None
+        for i in range(1, len(self)):
+            if target is None or i - r > c.local_map_every:
+                r = i - 1
+                window = np.flatnonzero(
+                    (self.travelled_m <= self.travelled_m[r])
+                    & (self.travelled_m >= self.travelled_m[r] - c.local_map_m)
+                    & (np.arange(len(self)) <= r)
+                )
+                target = self._map(inverse_h(placed[r]) @ placed[window], window)
+            guess = placed[i - 1] @ steps[i - 1]
+            M_r_i = self._register(i, target, inverse_h(placed[r]) @ guess, False, found, r)
+            placed[i] = guess if M_r_i is None else placed[r] @ M_r_i
+        return found.factors(self.config, loop=False), placed
+
     def loops(self, M_map_base: FloatArray) -> RelativePoseFactors:
-        """Loop closures at the estimate ``M_map_base`` (step 3 of the module docstring)."""
+        """Loop closures at the estimate ``M_map_base`` (step 3 of the module docstring): each
+        onto the local map around the earlier visit (the keyframes within ``local_map_m / 2``
+        of travel of it, at the estimate), in the frame of a keyframe on a grid of
+        ``2 * local_map_every`` keyframes (so neighbouring closures share one map)."""
         c = self.config
         xy = M_map_base[self.keyframe, :2, 3]
-        pairs: list[tuple[int, int]] = []
+        M_lidar = M_map_base[self.keyframe] @ self.M_base_lidar
+        found, maps, pairs = _Found(), {}, 0
         for j in range(0, len(self), c.loop_stride):
             far = self.travelled_m[j] - self.travelled_m >= c.loop_min_travel_m
             dist = np.linalg.norm(xy - xy[j], axis=1)
             candidates = np.flatnonzero(far & (dist <= c.loop_radius_m))
-            nearest = candidates[np.argsort(dist[candidates])][: c.loops_per_keyframe]
-            pairs += [(int(i), j) for i in nearest]
-        factors = self._register_pairs(pairs, M_map_base, loop=True)
+            for i in candidates[np.argsort(dist[candidates])][: c.loops_per_keyframe]:
+                r = int(i) - int(i) % (2 * c.local_map_every)
+                if r not in maps:
+                    near = np.abs(self.travelled_m - self.travelled_m[r]) <= 0.5 * c.local_map_m
+                    near &= self.travelled_m[j] - self.travelled_m >= 0.5 * c.loop_min_travel_m
+                    window = np.flatnonzero(near)
+                    maps[r] = self._map(inverse_h(M_lidar[r]) @ M_lidar[window], window)
+                pairs += 1
+                self._register(j, maps[r], inverse_h(M_lidar[r]) @ M_lidar[j], True, found, r)
+        factors = found.factors(self.config, loop=True)
         self.stats.loops += len(factors)
-        self.stats.loops_rejected += len(pairs) - len(factors)
-        logger.info("loop closures: %d of %d candidates accepted", len(factors), len(pairs))
+        self.stats.loops_rejected += pairs - len(factors)
+        logger.info("loop closures: %d of %d candidates accepted", len(factors), pairs)
         return factors
 
-    def _register_pairs(
-        self, pairs: list[tuple[int, int]], M_map_base: FloatArray, loop: bool
-    ) -> RelativePoseFactors:
+    def _map(self, M_r_lidar: FloatArray, window: IntArray) -> Target:
+        return local_map_target(M_r_lidar, [self.points_lidar[k] for k in window],
+                                self.registration_config())  # fmt: skip
+
+    def _register(
+        self, i: int, target: Target, M_init: FloatArray, loop: bool, found: _Found, r: int
+    ) -> FloatArray | None:
+        """Keyframe ``i``'s scan onto ``target`` (in keyframe ``r``'s scanner frame) from
+        ``M_init``; an accepted registration is added to ``found`` as a factor ``(r, i)`` in the
+        bases' frames, and its ``T_lidar_r_lidar_i`` returned (None: rejected)."""
         E, E_inv = self.M_base_lidar, inverse_h(self.M_base_lidar)
+        reg = register(self.points_lidar[i], target, SE3.from_matrix(M_init, normalize=True),
+                       self.registration_config())  # fmt: skip
+        self.stats.registrations += 1
+        info_lidar, reason = self._information(reg, DegeneracyConfig())
+        M_found = reg.T_target_source.as_matrix()
+        if loop and reason is None:
+            reason = self._moved_too_far(M_init, M_found)
+        if reason is not None:
+            self.stats.rejected_reasons[reason] = self.stats.rejected_reasons.get(reason, 0) + 1
+            return None
+        # xi_base = Ad(E) xi_lidar: Lambda_base = Ad(E)^-T Lambda_lidar Ad(E)^-1
         Ad_E_inv = adjoint(E_inv[None])[0]
-        reg_config = self.registration_config()
-        degeneracy = DegeneracyConfig()
-        a, b, M_ab, R = [], [], [], []
-        for i, j in pairs:
-            ka, kb = int(self.keyframe[i]), int(self.keyframe[j])
-            M_la_lb = E_inv @ inverse_h(M_map_base[ka]) @ M_map_base[kb] @ E
-            reg = register(
-                self.points_lidar[j], self.targets[i], SE3.from_matrix(M_la_lb, normalize=True),
-                reg_config,
-            )  # fmt: skip
-            self.stats.registrations += 1
-            info_lidar, reason = self._information(reg, degeneracy)
-            if loop and reason is None:
-                reason = self._moved_too_far(M_la_lb, reg.T_target_source.as_matrix())
-            if reason is not None:
-                self.stats.rejected_reasons[reason] = self.stats.rejected_reasons.get(reason, 0) + 1
-                continue
-            # xi_base = Ad(E) xi_lidar: Lambda_base = Ad(E)^-T Lambda_lidar Ad(E)^-1
-            info_base = Ad_E_inv.T @ info_lidar @ Ad_E_inv
-            a.append(ka)
-            b.append(kb)
-            M_ab.append(E @ reg.T_target_source.as_matrix() @ E_inv)
-            R.append(sqrt_information(info_base))
-        if not a:
-            return RelativePoseFactors.empty(self.config.kernel, self.config.robust_k)
-        return RelativePoseFactors(
-            np.array(a, dtype=np.int64), np.array(b, dtype=np.int64), np.array(M_ab),
-            np.array(R), np.full(len(a), loop), self.config.kernel, self.config.robust_k,
-        )  # fmt: skip
+        info_base = Ad_E_inv.T @ info_lidar @ Ad_E_inv
+        found.add(int(self.keyframe[r]), int(self.keyframe[i]), E @ M_found @ E_inv,
+                  sqrt_information(info_base))  # fmt: skip
+        return M_found
 
     def _moved_too_far(self, M_init: FloatArray, M_found: FloatArray) -> str | None:
         """A loop registration that moved far from the estimate's guess may have slid to the
@@ -219,42 +245,70 @@ class LidarKeyframes:
         cov_k = np.linalg.inv(basis.T @ reg.plane_hessian @ basis) * variance
         cov_k /= c.information_scale
         # floors: what a flat Hessian claims is not believed
-        floor = np.diag([c.min_sigma_m**2] * 3 + [c.min_sigma_rad**2] * 3)
+        floor = np.diag(
+            [c.min_sigma_m**2] * 3 + [c.min_sigma_tilt_rad**2] * 2 + [c.min_sigma_rad**2]
+        )
         cov_k = cov_k + basis.T @ floor @ basis
         info = basis @ np.linalg.inv(cov_k) @ basis.T
         return 0.5 * (info + info.T), None
 
 
-def scan_odometry(
-    obs: Observations, sequential: RelativePoseFactors, config: MapBuildConfig
-) -> SE3:
-    """The keyframes' odometry corrected by the consecutive registrations (``T_odom_base``, batch
-    of K): odometry and scan factors alone, optimized from the odometry (a chain: GTSAM solves
-    it in one or two iterations). The builder initializes from it instead of the raw odometry:
-    a scan-matched chain drifts far less (0.3 deg/m of odometry yaw drift is 36 deg over 120 m,
-    enough for the tag-based initialization to seat keyframes on the wrong tags)."""
-    M_odom = obs.T_odom_base.as_matrix().reshape(-1, 4, 4)
-    graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
-    for k, M in enumerate(M_odom):
-        values.insert(X(k), gtsam.Pose3(gtsam.Rot3(M[:3, :3]), M[:3, 3]))
-    graph.add(gtsam.PriorFactorPose3(X(0), gtsam.Pose3(gtsam.Rot3(M_odom[0, :3, :3]),
-                                                       M_odom[0, :3, 3]),
-                                     gtsam.noiseModel.Isotropic.Sigma(6, 1e-6)))  # fmt: skip
-    steps = inverse_h(M_odom[:-1]) @ M_odom[1:]
-    up = (
-        config.odometry_frame.up_in_base(M_odom[:, :3, :3])
-        if config.odometry_frame.knows_up
-        else None
-    )
-    noise = odometry_whitening(M_odom, config.odometry, up)
-    for k, M in enumerate(steps):
-        Z = gtsam.Pose3(gtsam.Rot3(M[:3, :3]), M[:3, 3])
-        graph.add(gtsam.BetweenFactorPose3(X(k), X(k + 1), Z, noise.gtsam_model(k)))
-    add_relative_factors(graph, sequential, X)
-    with solver_errors("the scan-matched odometry"):
-        result = gtsam.LevenbergMarquardtOptimizer(graph, values, lm_params(config)).optimize()
-    M = np.array([result.atPose3(X(k)).matrix() for k in range(len(M_odom))])
-    return SE3.from_matrix(M, normalize=True)
+@dataclass(slots=True)
+class _Found:
+    """Accepted registrations, gathered into :class:`RelativePoseFactors`."""
+
+    a: list[int] = field(default_factory=list)
+    b: list[int] = field(default_factory=list)
+    M_a_b: list[FloatArray] = field(default_factory=list)
+    R: list[FloatArray] = field(default_factory=list)
+
+    def add(self, a: int, b: int, M_a_b: FloatArray, R: FloatArray) -> None:
+        self.a.append(a)
+        self.b.append(b)
+        self.M_a_b.append(M_a_b)
+        self.R.append(R)
+
+    def factors(self, config: LidarSurveyConfig, loop: bool) -> RelativePoseFactors:
+        if not self.a:
+            return RelativePoseFactors.empty(config.kernel, config.robust_k)
+        return RelativePoseFactors(
+            np.array(self.a, dtype=np.int64), np.array(self.b, dtype=np.int64),
+            np.array(self.M_a_b), np.array(self.R), np.full(len(self.a), loop), config.kernel,
+            config.robust_k,
+        )  # fmt: skip
+
+
+def sequential_factors(
+    survey: Survey, scans: LidarKeyframes, M_map_base: FloatArray
+) -> tuple[LidarKeyframes, RelativePoseFactors]:
+    """Step 2 of the module docstring, de-skewed twice: the keyframes (their scans de-skewed
+    again) and their consecutive registrations.
+
+    The first pass de-skews each sweep with the odometry's velocity: its systematic errors
+    (0.3 deg/m of yaw drift is 4 mrad/s at 0.8 m/s, a distance scale of a few %) skew every
+    sweep the same way, and the registrations inherit it as a bias (simulated loop corridor:
+    0.27 mrad of yaw per 0.75 m step, a bend of the map; 0.15 with the true motion). With
+    ``deskew_passes`` 2, each sweep where the robot goes straight
+    (:func:`~tagloc.mapping.lidar_sweeps.steady_keyframes`) is de-skewed again with the
+    scanner's velocity from the scan-matched poses of its neighbours
+    (:func:`~tagloc.mapping.lidar_sweeps.scan_velocity`: a mean over two steps, too coarse for a
+    turn, where the odometry's own velocity stays), and all are registered again
+    (the loop corridor: 0.04 mrad of yaw per step).
+    """
+    factors, placed = scans.chain(M_map_base)
+    if scans.config.deskew_passes > 1 and len(scans) > 2 and survey.lidar is not None:
+        stamps_s = survey.lidar.stamps_ns[scans.sweep].astype(np.float64) / 1e9
+        velocity = scan_velocity(placed, stamps_s)
+        steady = steady_keyframes(placed)
+        points = tuple(
+            keyframe_points(survey, int(s), scans.config, velocity[i] if steady[i] else None)
+            for i, s in enumerate(scans.sweep)
+        )
+        scans = replace(scans, points_lidar=points)
+        factors, _ = scans.chain(M_map_base)
+    scans.stats.sequential += len(factors)
+    scans.stats.sequential_rejected += len(scans) - 1 - len(factors)
+    return scans, factors
 
 
 def prepare_lidar(
@@ -274,70 +328,10 @@ def prepare_lidar(
         return None
     obs, keyframe = with_keyframes(obs, survey, scans.stamps_ns[chosen])
     M_base_lidar = scans.T_base_lidar.as_matrix()
-    reg_config = RegistrationConfig(voxel_m=config.voxel_m,
-                                    max_correspondence_m=config.max_correspondence_m)  # fmt: skip
-    points, targets = [], []
-    for s in chosen:
-        p = keyframe_points(survey, int(s), config)
-        points.append(p)
-        targets.append(Target.from_points(p, reg_config))
+    points = [keyframe_points(survey, int(s), config) for s in chosen]
     T_odom = obs.T_odom_base.as_matrix().reshape(-1, 4, 4)[keyframe]
     steps = np.linalg.norm(np.diff(T_odom[:, :3, 3], axis=0), axis=1)
     travelled = np.concatenate([[0.0], np.cumsum(steps)])
     stats = LidarStats(keyframes=len(chosen))
-    return obs, LidarKeyframes(keyframe, np.asarray(chosen), tuple(points), tuple(targets),
+    return obs, LidarKeyframes(keyframe, np.asarray(chosen), tuple(points),
                                travelled, M_base_lidar, config, stats)  # fmt: skip
-
-
-def keyframe_points(survey: Survey, sweep: int, config: LidarSurveyConfig) -> FloatArray:
-    """Sweep ``sweep`` of ``survey.lidar`` de-skewed to its stamp with the odometry, cut to
-    ``max_range_m`` and downsampled to ``voxel_m / 2``; ``(N, 3)`` in the scanner frame."""
-    points = deskewed_points(survey, sweep, config.deskew_window_s)
-    dist = np.linalg.norm(points, axis=1)
-    keep = dist <= config.max_range_m
-    if config.min_height_m is not None:  # the floor left out (see LidarSurveyConfig)
-        assert survey.lidar is not None
-        z_base = survey.lidar.T_base_lidar.act(points)[:, 2]
-        keep &= z_base >= config.min_height_m
-    return voxel_downsample(points[keep], 0.5 * config.voxel_m)
-
-
-def deskewed_points(survey: Survey, sweep: int, window_s: float) -> FloatArray:
-    """Sweep ``sweep`` de-skewed to its stamp with the survey's odometry (scanner frame), at the
-    odometry's mean velocity over ``window_s`` around the sweep (:func:`sweep_motion`)."""
-    scans = survey.lidar
-    assert scans is not None
-    offsets = scans.time_offset_s[sweep]
-    if offsets is None:
-        return finite_points(scans.points_lidar[sweep])
-    period_s = float(np.nanmax(offsets)) if len(offsets) else 0.0
-    motion = sweep_motion(survey, int(scans.stamps_ns[sweep]), period_s, window_s)
-    return deskew(scans.points_lidar[sweep], offsets, motion)
-
-
-def sweep_motion(
-    survey: Survey, stamp_ns: int, period_s: float, window_s: float
-) -> Callable[[np.ndarray], SE3]:
-    """``offsets (K,) -> T_lidar0_lidart``: constant body velocity, the odometry's mean over
-    ``window_s`` centred on the sweep (clamped to the odometry's span).
-
-    Why a mean: odometry's own noise is white at the sample rate (legged odometry's yaw random
-    walk is 2.7 mrad over one 0.1 s sweep), and following it sample by sample de-skews the
-    sweep with that error (simulated office: 3.7 mrad RMS yaw error per registration, against
-    0.25 mrad with the true motion); the mean over 1 s leaves about a tenth of it.
-    """
-    scans = survey.lidar
-    assert scans is not None
-    E = scans.T_base_lidar
-    t0, t1 = int(survey.odom_stamps_ns[0]), int(survey.odom_stamps_ns[-1])
-    centre = stamp_ns + round(0.5 * period_s * S_NS)
-    half = round(0.5 * window_s * S_NS)
-    begin, end = max(t0, centre - half), min(t1, centre + half)
-    T = interpolate_odometry(survey, np.array([begin, end], dtype=np.int64))
-    twist = (T[0].inverse() @ T[1]).log() / max((end - begin) / S_NS, 1e-9)  # body, per s
-
-    def motion(offsets_s: np.ndarray) -> SE3:
-        step = SE3.exp(np.asarray(offsets_s, dtype=np.float64)[:, None] * twist[None])
-        return E.inverse() @ step @ E
-
-    return motion

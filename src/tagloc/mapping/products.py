@@ -25,7 +25,7 @@ from tagloc.config import StrictModel
 from tagloc.geometry import SE3
 from tagloc.lidar import OccupancyConfig, OccupancyGrid, build_occupancy, build_premap
 from tagloc.mapping.lidar_config import LidarSurveyConfig
-from tagloc.mapping.lidar_survey import deskewed_points
+from tagloc.mapping.lidar_sweeps import deskewed_points, scan_velocity, steady_keyframes
 from tagloc.mapping.report import BuildReport
 from tagloc.mapping.survey import MappingError, Survey
 
@@ -81,8 +81,15 @@ def placed_scans(
             f"{survey.source}: the map was built without lidar: no premap or occupancy grid"
         )
     T_map_lidar = report.T_map_base_optimized[index[on_keyframe]] @ scans.T_base_lidar
+    # de-skewed where the robot goes straight with the velocity of the optimized poses (as the
+    # scan matching's second pass: tagloc.mapping.lidar_survey.sequential_factors)
+    M_map_lidar = T_map_lidar.as_matrix()
+    velocity = scan_velocity(M_map_lidar, scans.stamps_ns[on_keyframe] / 1e9)
+    steady = steady_keyframes(M_map_lidar)
+    chosen = [velocity[i] if steady[i] else None for i in range(len(on_keyframe))]
     return [
-        (T_map_lidar[i], deskewed_points(survey, int(s), window)) for i, s in enumerate(on_keyframe)
+        (T_map_lidar[i], deskewed_points(survey, int(s), window, chosen[i]))
+        for i, s in enumerate(on_keyframe)
     ]
 
 

@@ -82,6 +82,11 @@ class BuildReport:
         (:mod:`tagloc.mapping.graph_export`); :meth:`graph_jsonl` writes them.
     scan_matching : dict of str to int
         With lidar: keyframe scans, consecutive and loop registrations accepted and rejected.
+    scale : dict of str to float
+        The scales the build found (fractions: 0.01 is 1 %): ``odometry`` (the correction of
+        the odometry's distance scale, :mod:`tagloc.mapping.calibration`) and, with lidar,
+        ``scan_matching`` with ``scan_matching_sigma``: the consecutive registrations' scale
+        against the optimized keyframes (:func:`tagloc.mapping.scan_factors.scan_scale`).
     """
 
     source: str
@@ -105,6 +110,7 @@ class BuildReport:
     uncertainty_flag_m: float = float("nan")
     factors: tuple[dict[str, Any], ...] = ()
     scan_matching: dict[str, int] = field(default_factory=dict)
+    scale: dict[str, float] = field(default_factory=dict)
 
     @property
     def uncertain_tags(self) -> tuple[int, ...]:
@@ -143,6 +149,7 @@ class BuildReport:
             "error_final": self.error_final,
             "timings_s": {k: round(v, 4) for k, v in self.timings_s.items()},
             "scan_matching": dict(self.scan_matching),
+            "scale": {k: round(v, 6) for k, v in self.scale.items()},
             "tags": [
                 {
                     "id": t.tag_id,
@@ -196,7 +203,20 @@ class BuildReport:
             f"optimize {t.get('optimize', 0.0):.2f} s, "
             f"covariance {t.get('covariance', 0.0):.2f} s)",
             *self._scan_lines(),
+            *self._scale_lines(),
         ]
+
+    def _scale_lines(self) -> list[str]:
+        c = self.scale
+        if "odometry" not in c:
+            return []
+        line = f"scale: odometry corrected by {100 * c['odometry']:+.2f} %"
+        if "scan_matching" in c:
+            line += (
+                f"; scan matching {100 * c['scan_matching']:+.3f} % "
+                f"(+- {100 * c.get('scan_matching_sigma', float('nan')):.3f} %) against the map"
+            )
+        return [line]
 
     def _scan_lines(self) -> list[str]:
         m = self.scan_matching

@@ -174,3 +174,29 @@ def add_relative_factors(
         )
         Z = gtsam.Pose3(gtsam.Rot3(M[:3, :3]), M[:3, 3])
         graph.add(gtsam.BetweenFactorPose3(key(int(a)), key(int(b)), Z, model))
+
+
+def scan_scale(M_map_base: FloatArray, factors: RelativePoseFactors) -> tuple[float, float]:
+    """The scale of the consecutive registrations against the trajectory ``M_map_base``:
+    ``(s, sigma)`` with ``(1 + s)`` the least-squares factor from the trajectory's relative
+    translations to the registrations' (``s`` > 0: the scans measure the steps longer than the
+    map has them), over the non-loop factors, and its standard error. ``(nan, nan)`` with fewer
+    than two factors.
+
+    A registration chain that over- or underestimates each step (the ring sampling of one sweep
+    against another) shows here as ``s``: the builder reports it (the map's scale is that of the
+    tags and the calibrated odometry; this says whether the scans agree).
+    """
+    keep = ~factors.loop
+    if keep.sum() < 2:
+        return float("nan"), float("nan")
+    B = inverse_h(M_map_base[factors.a[keep]]) @ M_map_base[factors.b[keep]]
+    t_map, t_scan = B[:, :3, 3], factors.M_a_b[keep, :3, 3]
+    norm2 = float(np.sum(t_map * t_map))
+    if norm2 <= 0.0:
+        return float("nan"), float("nan")
+    factor = float(np.sum(t_scan * t_map)) / norm2
+    residual = t_scan - factor * t_map
+    n = int(keep.sum())
+    sigma = float(np.sqrt(np.sum(residual**2) / max(3 * n - 1, 1) / norm2))
+    return factor - 1.0, sigma

@@ -344,7 +344,9 @@ def load_default_world() -> World:
 
 
 #: The built-in worlds (``tagloc/sim/worlds/<name>.yaml``); each file documents itself.
-BUILTIN_WORLDS = ("office", "glass_corridor", "mirrored_lobby", "long_corridor")
+BUILTIN_WORLDS = (
+    "office", "glass_corridor", "mirrored_lobby", "long_corridor", "sparse_building",
+)  # fmt: skip
 
 
 def load_builtin_world(name: str) -> World:
