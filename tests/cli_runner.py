@@ -13,15 +13,16 @@ _MAIN = "from tagloc.cli import main; main()"
 _SRC = str(Path(tagloc.__file__).resolve().parents[1])
 
 
-def run_tagloc(*args: str) -> subprocess.CompletedProcess[str]:
-    """``tagloc ARGS`` with a bare environment (no PATH, Agg plots, a wide terminal)."""
+def run_tagloc(*args: str, timeout_s: float = 300.0) -> subprocess.CompletedProcess[str]:
+    """``tagloc ARGS`` with a bare environment (no PATH, Agg plots, a wide terminal); a hang is
+    a failure after ``timeout_s``."""
     return subprocess.run(
         [sys.executable, "-c", _MAIN, *args],
         capture_output=True,
         text=True,
         env={"MPLBACKEND": "Agg", "PATH": "", "COLUMNS": "200", "PYTHONPATH": _SRC},
         check=False,
-        timeout=300.0,
+        timeout=timeout_s,
     )
 
 

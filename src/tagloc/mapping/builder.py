@@ -196,6 +196,7 @@ def build_tag_map(
     t = time.perf_counter()
     M_anchor, anchor_sigmas = _anchor_indices(anchors, obs, survey.source, config)
     R_odom_base = obs.T_odom_base.as_matrix().reshape(-1, 4, 4)[:, :3, :3]
+    frame_warning = None
     if not config.odometry_frame.knows_up:  # no vertical to split the odometry noise about
         logger.info("%s: the odometry frame knows no up: no vertical noise split", survey.source)
         config = config.model_copy(
@@ -204,7 +205,7 @@ def build_tag_map(
         odometry_up = np.tile([0.0, 0.0, 1.0], (len(R_odom_base), 1))
     else:
         odometry_up = config.odometry_frame.up_in_base(R_odom_base)
-        _check_odometry_frame(R_odom_base, odometry_up, config, survey.source)
+        frame_warning = _check_odometry_frame(R_odom_base, odometry_up, config, survey.source)
     gravity = config.odometry_frame.gravity_aligned and config.gravity.priors
     priors = Priors(anchor_sigmas, odometry_up if gravity else None, odometry_up)
     M_map_base = initialize_keyframes(obs_init, M_anchor, config.max_ambiguity_for_init)
@@ -306,6 +307,8 @@ def build_tag_map(
     odometry_z = config.odometry_frame.model_copy(update={"gravity_aligned": True})
     up_odom = odometry_z.up_in_base(R_odom_base)  # the odometry frame's up, in each base
     object.__setattr__(report, "tilt_deg", map_tilt_deg(solution.M_map_base, up_odom))
+    if frame_warning is not None:
+        object.__setattr__(report, "warnings", (frame_warning,))
     factors = graph_records(
         survey, obs, solution, M_odom_raw, state.c, held, priors, config, relative
     )
@@ -339,17 +342,19 @@ BASE_TILT_WARN_DEG = 30.0
 
 def _check_odometry_frame(
     R_odom_base: np.ndarray, odometry_up: np.ndarray, config: MapBuildConfig, source: str
-) -> None:
-    """Warn (once, in the log) when the body's "up" is far from the odometry frame's z."""
+) -> str | None:
+    """The warning (for the QA report) when the body's "up" is far from the odometry frame's z."""
     if config.odometry_frame.gravity_aligned:
-        return
+        return None
     tilt = base_tilt_deg(R_odom_base, odometry_up)
-    if tilt > BASE_TILT_WARN_DEG:
-        logger.warning(
-            "%s: the body's up axis (%s) is %.0f deg from the odometry frame's z (median over "
-            "keyframes): the odometry noise is split about the wrong vertical; if the odometry "
-            "is gravity-aligned (VIO) set odometry_frame.gravity_aligned, otherwise "
-            "odometry_frame.base_up_axis",
-            source, config.odometry_frame.base_up_axis, tilt,
-        )  # fmt: skip
+    if tilt <= BASE_TILT_WARN_DEG:
+        return None
+    message = (
+        f"{source}: the body's up axis ({config.odometry_frame.base_up_axis}) is {tilt:.0f} deg "
+        "from the odometry frame's z (median over keyframes): the odometry noise is split about "
+        "the wrong vertical; if the odometry is gravity-aligned (VIO) set "
+        "odometry_frame.gravity_aligned, otherwise odometry_frame.base_up_axis"
+    )
+    logger.info("%s", message)
+    return message
 

@@ -111,6 +111,8 @@ class BuildReport:
     factors: tuple[dict[str, Any], ...] = ()
     scan_matching: dict[str, int] = field(default_factory=dict)
     scale: dict[str, float] = field(default_factory=dict)
+    #: What the build found wrong with its inputs (printed as ``WARNING:`` lines).
+    warnings: tuple[str, ...] = ()
 
     @property
     def uncertain_tags(self) -> tuple[int, ...]:
@@ -143,6 +145,7 @@ class BuildReport:
             "uncertainty_flag_m": self.uncertainty_flag_m,
             "tilt_deg": round(self.tilt_deg, 4),
             "gravity_priors": self.gravity_priors,
+            "warnings": list(self.warnings),
             "max_odometry_correction_m": round(float(self.correction_m().max()), 4),
             "iterations": self.iterations,
             "error_initial": self.error_initial,
@@ -204,6 +207,7 @@ class BuildReport:
             f"covariance {t.get('covariance', 0.0):.2f} s)",
             *self._scan_lines(),
             *self._scale_lines(),
+            *(f"WARNING: {w}" for w in self.warnings),
         ]
 
     def _scale_lines(self) -> list[str]:
