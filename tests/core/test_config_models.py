@@ -18,10 +18,23 @@ from tagloc.sim.odometry import DriftParameters
 from tagloc.tags.covariance import NoiseModel
 from tagloc.tags.gates import GateConfig
 
+#: Optional integrations whose framework is an extra (``tagloc[dimos]``): their models are
+#: checked where the extra is installed (``make test-dimos``).
+OPTIONAL = ("tagloc.adapters.dimos",)
+
 
 def _models() -> list[type[pydantic.BaseModel]]:
-    for info in pkgutil.walk_packages(tagloc.__path__, "tagloc."):
-        importlib.import_module(info.name)
+    def skip(name: str) -> bool:
+        return any(name == o or name.startswith(o + ".") for o in OPTIONAL)
+
+    for info in pkgutil.walk_packages(tagloc.__path__, "tagloc.", onerror=lambda name: None):
+        if skip(info.name):
+            try:
+                importlib.import_module(info.name)
+            except ModuleNotFoundError:
+                continue
+        else:
+            importlib.import_module(info.name)
     seen: list[type[pydantic.BaseModel]] = []
     todo = [pydantic.BaseModel]
     while todo:

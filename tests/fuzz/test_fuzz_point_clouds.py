@@ -24,8 +24,9 @@ from hypothesis import strategies as st
 from tagloc.errors import TaglocError
 from tagloc.io import PointCloudMsg
 from tagloc.io.bag_writer import _Encoder
-from tagloc.io.convert import Bad, DecodeOptions, decode
+from tagloc.io.convert import decode
 from tagloc.io.convert_cloud import MAX_SWEEP_SPAN_S
+from tagloc.io.decoded import Bad, DecodeOptions
 from tagloc.io.map_server import read_map_server, write_map_server
 from tagloc.io.pointcloud_files import (
     MAX_COORDINATE_M,

@@ -51,7 +51,8 @@ from typing import Any, Literal, NamedTuple
 
 from tagloc.config import validate
 from tagloc.fileutil import atomic_path
-from tagloc.io.convert import DECODERS, Bad, DecodeOptions, decode, make_typestore
+from tagloc.io.convert import DECODERS, decode, make_typestore
+from tagloc.io.decoded import Bad, DecodeOptions
 from tagloc.io.errors import BagFormatError, BagTopicError, InputNotFoundError, RecordError
 from tagloc.messages import Message, TransformMsg
 from tagloc.tags.detection import TAGLOC_ORDER, corner_permutation

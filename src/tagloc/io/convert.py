@@ -37,15 +37,15 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Callable, Mapping
-from typing import Any, Literal, NamedTuple
+from typing import Any, Literal
 
 import cv2
 import numpy as np
 
 from tagloc._types import FloatArray
-from tagloc.config import StrictModel
 from tagloc.geometry import SE3
 from tagloc.io.convert_cloud import point_cloud
+from tagloc.io.decoded import Bad, Decoded, DecodeOptions, stamp_of
 from tagloc.io.errors import BagFormatError
 from tagloc.messages import (
     CameraInfoMsg,
@@ -58,7 +58,7 @@ from tagloc.messages import (
     TagDetectionsMsg,
     TransformMsg,
 )
-from tagloc.tags.detection import TAGLOC_ORDER, TagDetection, corner_permutation
+from tagloc.tags.detection import TagDetection, corner_permutation
 from tagloc.tags.errors import TagInputError
 from tagloc.tags.families import known_families
 
@@ -101,26 +101,6 @@ def make_typestore(ros_version: Literal[1, 2]) -> Any:
     return _typestore(ros_version)
 
 
-class Bad(NamedTuple):
-    """Content that breaks a rule: ``reason`` is the key of the reader's ``skipped`` counter."""
-
-    reason: str
-    detail: str
-
-
-class DecodeOptions(StrictModel):
-    """How the reader turns messages into records (see :class:`tagloc.io.BagSource`)."""
-
-    stamp: Literal["header", "log"] = "header"
-    corner_order: str = TAGLOC_ORDER
-    pixel_offset: float = 0.0
-    default_family: str | None = None
-    quat_tol: float = 1e-3
-
-
-Decoded = list[Message | Bad]
-
-
 def cov_body_from_ros(cov_ros: FloatArray, R: FloatArray) -> FloatArray:
     """ROS pose covariance (parent-frame axes) to tagloc's body tangent: ``B^T cov_ros B``.
 
@@ -144,12 +124,6 @@ def cov_ros_from_body(cov_body: FloatArray, R: FloatArray) -> FloatArray:
 
 
 # ----- decoding ----------------------------------------------------------------------------------
-def stamp_of(header: Any, log_ns: int, opts: DecodeOptions) -> int:
-    if opts.stamp == "log":
-        return log_ns
-    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
-
-
 def _pose(position: Any, orientation: Any, opts: DecodeOptions) -> SE3 | Bad:
     t = (position.x, position.y, position.z)
     q = (orientation.x, orientation.y, orientation.z, orientation.w)

@@ -15,14 +15,12 @@ Limits, checked on the message's announced size before any point is copied:
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
+from tagloc.io.decoded import Bad, Decoded, DecodeOptions, stamp_of
 from tagloc.messages import PointCloudMsg
-
-if TYPE_CHECKING:
-    from tagloc.io.convert import Decoded, DecodeOptions
 
 __all__ = [
     "MAX_POINT_RANGE_M",
@@ -54,8 +52,6 @@ def point_cloud(msg: Any, log_ns: int, opts: DecodeOptions, static: bool) -> Dec
 
 
 def _point_cloud(msg: Any, log_ns: int, opts: DecodeOptions) -> Decoded:
-    from tagloc.io.convert import Bad, stamp_of
-
     h, w, step, row_step = (int(v) for v in (msg.height, msg.width, msg.point_step, msg.row_step))
     data = np.asarray(msg.data, dtype=np.uint8)
     shape = f"{h}x{w} cloud, point_step {step}, row_step {row_step}, {data.size} bytes"
