@@ -15,12 +15,9 @@ each written atomically (temporary file beside it, then rename):
 
 from __future__ import annotations
 
-import base64
 import html
 import json
 import logging
-import math
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Protocol
 
@@ -29,6 +26,9 @@ import numpy.typing as npt
 
 from tagloc.eval.fixstats import AcceptanceBin
 from tagloc.eval.protocol import EvalConfig
+from tagloc.eval.report_style import CSS as _CSS
+from tagloc.eval.report_style import figure as _img
+from tagloc.eval.report_style import table as _table
 from tagloc.eval.summary import EvalSummary, Evaluation, evaluate, summary_to_dict
 from tagloc.fileutil import atomic_write_text
 from tagloc.geometry import SE3
@@ -105,35 +105,6 @@ def export_tum(
 
 
 # ----- HTML ------------------------------------------------------------------------------------
-_CSS = """body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}
-table{border-collapse:collapse;margin:0.6em 0}td,th{border:1px solid #ccc;padding:3px 8px;
-text-align:right}th{background:#f2f2f2}td:first-child{text-align:left}.pass{background:#d9f2d9}
-.fail{background:#f7d4d4}.unknown{background:#eee}img{max-width:100%}"""
-
-
-def _fmt(value: object, digits: int = 4) -> str:
-    if value is None:
-        return "n/a"
-    if isinstance(value, float):
-        return "n/a" if not math.isfinite(value) else f"{value:.{digits}g}"
-    return html.escape(str(value))
-
-
-def _table(
-    header: list[str], rows: Sequence[Sequence[object]], classes: list[str] | None = None
-) -> str:
-    head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
-    body = []
-    for i, row in enumerate(rows):
-        cls = f' class="{classes[i]}"' if classes else ""
-        body.append(f"<tr{cls}>" + "".join(f"<td>{_fmt(v)}</td>" for v in row) + "</tr>")
-    return f"<table><tr>{head}</tr>{''.join(body)}</table>"
-
-
-def _img(png: bytes, alt: str) -> str:
-    return f'<p><img alt="{alt}" src="data:image/png;base64,{base64.b64encode(png).decode()}"></p>'
-
-
 def render_html(ev: Evaluation, metadata: dict[str, object]) -> str:
     """The report as one self-contained HTML page."""
     s = ev.summary
