@@ -122,10 +122,7 @@ def cov_compose(T1: G, cov1: npt.ArrayLike, T2: G, cov2: npt.ArrayLike) -> Float
     -------
     (d, d) or (N, d, d) float
     """
-    c1 = _cov(T1, cov1, "cov1")
-    c2 = _cov(T2, cov2, "cov2")
-    _, J1, _ = T1.compose(T2, jacobians=True)
-    return _sym(_sandwich(J1, c1) + c2)
+    return _first_plus_second(T1.compose(T2, jacobians=True)[1], T1, cov1, T2, cov2)
 
 
 def cov_between(T1: G, cov1: npt.ArrayLike, T2: G, cov2: npt.ArrayLike) -> FloatArray:
@@ -133,16 +130,16 @@ def cov_between(T1: G, cov1: npt.ArrayLike, T2: G, cov2: npt.ArrayLike) -> Float
 
     ``Z = T1^-1 T2``: ``C_Z = Ad_Z^-1 C1 Ad_Z^-T + C2`` (``J_Z_T1 = -Ad_Z^-1``, ``J_Z_T2 = I``).
 
-    Parameters
-    ----------
-    T1, T2 : same type, single or batches (broadcast)
-    cov1, cov2 : (d, d) or (N, d, d) float
-
-    Returns
-    -------
-    (d, d) or (N, d, d) float
+    ``T1``, ``T2``, ``cov1`` and ``cov2`` as in :func:`cov_compose`; returns the ``(d, d)`` or
+    ``(N, d, d)`` covariance of the relative pose.
     """
+    return _first_plus_second(T1.between(T2, jacobians=True)[1], T1, cov1, T2, cov2)
+
+
+def _first_plus_second(
+    J1: FloatArray, T1: LieGroup, cov1: npt.ArrayLike, T2: LieGroup, cov2: npt.ArrayLike
+) -> FloatArray:
+    """``J1 C1 J1^T + C2``: an output whose Jacobian in ``T2`` is the identity."""
     c1 = _cov(T1, cov1, "cov1")
     c2 = _cov(T2, cov2, "cov2")
-    _, J1, _ = T1.between(T2, jacobians=True)
     return _sym(_sandwich(J1, c1) + c2)
