@@ -25,9 +25,16 @@ import numpy.typing as npt
 
 from tagloc._types import FloatArray
 from tagloc.errors import GeometryError
-from tagloc.geometry._checks import broadcast_jacobian, check_finite, to_float_array
+from tagloc.geometry._checks import (
+    broadcast_jacobian,
+    check_finite,
+    check_points,
+    to_float_array,
+)
 
 Index = int | slice | Sequence[int] | npt.NDArray[np.integer] | npt.NDArray[np.bool_]
+#: What a group's action hook returns: the moved points, or with them ``J_out_self, J_out_points``.
+ActResult = FloatArray | tuple[FloatArray, FloatArray, FloatArray]
 
 
 class LieGroup:
@@ -36,6 +43,8 @@ class LieGroup:
     __slots__ = ()
 
     DOF: ClassVar[int]
+    #: Dimension of the points the group acts on (3 for SO3 and SE3, 2 for SE2).
+    POINT_DIM: ClassVar[int]
 
     # ----- hooks the concrete types implement ------------------------------------------------
     @property
@@ -71,6 +80,9 @@ class LieGroup:
     def _concat(cls, items: Sequence[Self]) -> Self:
         raise NotImplementedError
 
+    def _act(self, array: FloatArray, jacobians: bool) -> ActResult:
+        raise NotImplementedError
+
     def adjoint(self) -> FloatArray:
         """Adjoint matrix ``Ad_X`` with ``X @ Exp(tau) = Exp(Ad_X tau) @ X``."""
         raise NotImplementedError
@@ -102,6 +114,31 @@ class LieGroup:
                 f"{type(self).__name__} values (use .act(points) to transform points)"
             )
         return self._compose(other)
+
+    @overload
+    def act(self, points: npt.ArrayLike, *, jacobians: Literal[False] = ...) -> FloatArray: ...
+    @overload
+    def act(
+        self, points: npt.ArrayLike, *, jacobians: Literal[True]
+    ) -> tuple[FloatArray, FloatArray, FloatArray]: ...
+    def act(self, points: npt.ArrayLike, *, jacobians: bool = False) -> ActResult:
+        """Move points by the group action: ``points_a = R_a_b points_b (+ t_a_b)``.
+
+        Parameters
+        ----------
+        points : float array, last axis ``POINT_DIM`` (``d``)
+            A single element takes ``(d,)`` or ``(..., d)``. A batch of ``N`` takes ``(d,)`` (one
+            point, moved by each element), ``(N, d)`` (point ``i`` by element ``i``) or
+            ``(N, M, d)`` (``M`` points per element).
+        jacobians : bool
+            Also return ``J_out_self`` (``out.shape[:-1] + (d, DOF)``) and ``J_out_points``
+            (``out.shape[:-1] + (d, d)``); each type's ``_act`` gives the formulas.
+
+        Returns
+        -------
+        float array, the broadcast shape of ``points``
+        """
+        return self._act(check_points(points, self.POINT_DIM), jacobians)
 
     @overload
     def compose(self, other: Self, *, jacobians: Literal[False] = ...) -> Self: ...

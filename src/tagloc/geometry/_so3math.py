@@ -250,6 +250,14 @@ def rotate(matrix: FloatArray, points: FloatArray) -> FloatArray:
     )
 
 
+def transform(matrix: FloatArray, translation: FloatArray, points: FloatArray) -> FloatArray:
+    """``R p + t`` for one rigid transform or a batch (shapes as :func:`rotate`; ``translation``
+    is ``(d,)`` or ``(N, d)``)."""
+    out = rotate(matrix, points)
+    out += translation[:, None, :] if (translation.ndim == 2 and out.ndim == 3) else translation
+    return out
+
+
 def rotation_for(matrix: FloatArray, out_ndim: int) -> FloatArray:
     """``matrix`` reshaped to broadcast against per-point ``(..., 3, 3)`` Jacobians."""
     if matrix.ndim == 3 and out_ndim == 3:

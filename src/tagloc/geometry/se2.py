@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import ClassVar, Literal, overload
+from typing import ClassVar
 
 import numpy as np
 import numpy.typing as npt
@@ -20,7 +20,7 @@ from tagloc.errors import GeometryError
 from tagloc.geometry import _checks, _scalar
 from tagloc.geometry import _so3math as so3m
 from tagloc.geometry import jacobians as jac
-from tagloc.geometry._lie import Index, LieGroup
+from tagloc.geometry._lie import ActResult, Index, LieGroup
 from tagloc.geometry.se3 import SE3
 
 
@@ -57,6 +57,7 @@ class SE2(LieGroup):
     translation: FloatArray
     rotation_angle: FloatArray
     DOF: ClassVar[int] = 3
+    POINT_DIM: ClassVar[int] = 2
 
     def __init__(self, x: npt.ArrayLike, y: npt.ArrayLike, theta: npt.ArrayLike) -> None:
         try:
@@ -184,25 +185,11 @@ class SE2(LieGroup):
         return SE3._make(matrix, translation)
 
     # ----- action ----------------------------------------------------------------------------
-    @overload
-    def act(self, points: npt.ArrayLike, *, jacobians: Literal[False] = ...) -> FloatArray: ...
-    @overload
-    def act(
-        self, points: npt.ArrayLike, *, jacobians: Literal[True]
-    ) -> tuple[FloatArray, FloatArray, FloatArray]: ...
-    def act(
-        self, points: npt.ArrayLike, *, jacobians: bool = False
-    ) -> FloatArray | tuple[FloatArray, FloatArray, FloatArray]:
-        """Transform planar points ``p_a = R(theta) p_b + t``; shapes as :meth:`SE3.act` with 2.
-
-        With ``jacobians=True`` also ``J_out_T = [R, R [1]x p]`` (``(..., 2, 3)``, with
-        ``[1]x p = [-p_y, p_x]``) and ``J_out_p = R`` (``(..., 2, 2)``) (Sola App. C).
-        """
-        array = _checks.check_points(points, 2)
+    def _act(self, array: FloatArray, jacobians: bool) -> ActResult:
+        """Planar ``p_a = R(theta) p_b + t``; Jacobians ``J_out_T = [R, R [1]x p]`` (with
+        ``[1]x p = [-p_y, p_x]``) and ``J_out_p = R`` (Sola App. C)."""
         matrix = rotation_2d(self.rotation_angle)
-        out = so3m.rotate(matrix, array)
-        t = self.translation
-        out += t[:, None, :] if (t.ndim == 2 and out.ndim == 3) else t
+        out = so3m.transform(matrix, self.translation, array)
         if not jacobians:
             return out
         lead = out.shape[:-1]

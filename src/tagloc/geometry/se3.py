@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import ClassVar, Literal, overload
+from typing import ClassVar
 
 import numpy as np
 import numpy.typing as npt
@@ -20,7 +20,7 @@ from tagloc.geometry import _checks, _scalar
 from tagloc.geometry import _quatmath as quatm
 from tagloc.geometry import _so3math as so3m
 from tagloc.geometry import jacobians as jac
-from tagloc.geometry._lie import Index, LieGroup
+from tagloc.geometry._lie import ActResult, Index, LieGroup
 from tagloc.geometry.so3 import SO3
 
 
@@ -55,6 +55,7 @@ class SE3(LieGroup):
     rotation: SO3
     translation: FloatArray
     DOF: ClassVar[int] = 6
+    POINT_DIM: ClassVar[int] = 3
 
     def __post_init__(self) -> None:
         rotation = self.rotation
@@ -167,35 +168,11 @@ class SE3(LieGroup):
         return self.rotation.as_quat()
 
     # ----- action ----------------------------------------------------------------------------
-    @overload
-    def act(self, points: npt.ArrayLike, *, jacobians: Literal[False] = ...) -> FloatArray: ...
-    @overload
-    def act(
-        self, points: npt.ArrayLike, *, jacobians: Literal[True]
-    ) -> tuple[FloatArray, FloatArray, FloatArray]: ...
-    def act(
-        self, points: npt.ArrayLike, *, jacobians: bool = False
-    ) -> FloatArray | tuple[FloatArray, FloatArray, FloatArray]:
-        """Transform points: ``points_a = R_a_b points_b + t_a_b``.
-
-        Parameters
-        ----------
-        points : float array
-            A single pose takes ``(3,)`` or ``(..., 3)``. A batch of ``N`` takes ``(3,)`` (one
-            point, moved by each pose), ``(N, 3)`` (point ``i`` by pose ``i``) or ``(N, M, 3)``.
-        jacobians : bool
-            Also return ``J_out_T = [R, -R [p]x]`` (``out.shape[:-1] + (3, 6)``) and
-            ``J_out_p = R`` (``out.shape[:-1] + (3, 3)``) (Sola et al. 2018, App. D).
-
-        Returns
-        -------
-        float array, the broadcast shape of ``points``
-        """
-        array = _checks.check_points(points, 3)
+    def _act(self, array: FloatArray, jacobians: bool) -> ActResult:
+        """``points_a = R_a_b points_b + t_a_b``; Jacobians ``J_out_T = [R, -R [p]x]`` and
+        ``J_out_p = R`` (Sola et al. 2018, App. D)."""
         matrix = self.rotation.matrix
-        out = so3m.rotate(matrix, array)
-        t = self.translation
-        out += t[:, None, :] if (t.ndim == 2 and out.ndim == 3) else t
+        out = so3m.transform(matrix, self.translation, array)
         if not jacobians:
             return out
         lead = out.shape[:-1]

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import ClassVar, Literal, overload
+from typing import ClassVar
 
 import numpy as np
 import numpy.typing as npt
@@ -18,7 +18,7 @@ from tagloc.errors import GeometryError
 from tagloc.geometry import _checks, _scalar
 from tagloc.geometry import _quatmath as quatm
 from tagloc.geometry import _so3math as so3m
-from tagloc.geometry._lie import Index, LieGroup
+from tagloc.geometry._lie import ActResult, Index, LieGroup
 
 
 @dataclass(frozen=True, slots=True, eq=False, repr=False)
@@ -40,6 +40,7 @@ class SO3(LieGroup):
 
     matrix: FloatArray
     DOF: ClassVar[int] = 3
+    POINT_DIM: ClassVar[int] = 3
 
     def __post_init__(self) -> None:
         matrix = _checks.matrices(self.matrix, 3, "SO3 matrix")
@@ -169,32 +170,9 @@ class SO3(LieGroup):
         return self._make(so3m.project_to_so3(self.matrix))
 
     # ----- action ----------------------------------------------------------------------------
-    @overload
-    def act(self, points: npt.ArrayLike, *, jacobians: Literal[False] = ...) -> FloatArray: ...
-    @overload
-    def act(
-        self, points: npt.ArrayLike, *, jacobians: Literal[True]
-    ) -> tuple[FloatArray, FloatArray, FloatArray]: ...
-    def act(
-        self, points: npt.ArrayLike, *, jacobians: bool = False
-    ) -> FloatArray | tuple[FloatArray, FloatArray, FloatArray]:
-        """Rotate points: ``points_a = R_a_b points_b``.
-
-        Parameters
-        ----------
-        points : float array
-            A single rotation takes ``(3,)`` or ``(..., 3)``. A batch of ``N`` takes ``(3,)``
-            (one point, rotated by each), ``(N, 3)`` (point ``i`` by rotation ``i``) or
-            ``(N, M, 3)`` (``M`` points per rotation).
-        jacobians : bool
-            Also return ``J_out_R = -R [p]x`` and ``J_out_p = R``, shapes
-            ``out.shape[:-1] + (3, 3)`` (Sola et al. 2018, App. B).
-
-        Returns
-        -------
-        float array, same shape as the broadcast of ``points``
-        """
-        array = _checks.check_points(points, 3)
+    def _act(self, array: FloatArray, jacobians: bool) -> ActResult:
+        """``points_a = R_a_b points_b``; Jacobians ``J_out_R = -R [p]x`` and ``J_out_p = R``
+        (Sola et al. 2018, App. B)."""
         out = so3m.rotate(self.matrix, array)
         if not jacobians:
             return out
