@@ -41,7 +41,17 @@ Distorted = tuple[FloatArray, FloatArray, FloatArray | None]
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class _Pinhole:
-    """Image size and pinhole intrinsics (pixels); see the public subclasses."""
+    """Image size and pinhole intrinsics (pixels); see the public subclasses.
+
+    Attributes
+    ----------
+    width, height : int
+        Image size in pixels.
+    fx, fy : float
+        Focal lengths in pixels (> 0).
+    cx, cy : float
+        Principal point in pixels (top-left pixel center at ``(0, 0)``).
+    """
 
     width: int
     height: int
@@ -56,6 +66,26 @@ class _Pinhole:
     distortion_model: ClassVar[str]
     _ROS_MODEL: ClassVar[str]
     _COEFFS: ClassVar[tuple[str, ...]]
+    #: The name OpenCV gives the distortion vector, and the lengths it may have.
+    _OPENCV_D: ClassVar[tuple[str, tuple[int, ...]]]
+
+    @classmethod
+    def from_opencv(cls, K: npt.ArrayLike, D: npt.ArrayLike, image_size: tuple[int, int]) -> Self:
+        """Build from OpenCV's camera matrix ``K``, distortion vector ``D`` (``cv2.fisheye``'s 4
+        values for the equidistant model; ``distCoeffs``' 4 or 5 for radtan, a missing ``k3``
+        is 0) and ``(width, height)``.
+
+        Raises
+        ------
+        CameraModelError
+            If ``K`` is not a zero-skew 3x3 camera matrix or ``D`` has another length.
+        """
+        fx, fy, cx, cy = _fields.camera_matrix_values(K, "K")
+        D_name, counts = cls._OPENCV_D
+        k = _fields.float_list(np.ravel(D), D_name, counts, cls.distortion_model)
+        width, height = image_size
+        coeffs = dict(zip(cls._COEFFS, k, strict=False))
+        return cls(width=width, height=height, fx=fx, fy=fy, cx=cx, cy=cy, **coeffs)
 
     def __post_init__(self) -> None:
         kind = type(self).__name__

@@ -17,10 +17,9 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
-import numpy.typing as npt
 
 from tagloc._types import FloatArray
-from tagloc.camera import _fields, _radial
+from tagloc.camera import _radial
 from tagloc.camera._pinhole import Distorted, _Pinhole
 
 #: Below this normalized radius ``theta_d / r`` and its derivative use their Taylor series
@@ -32,14 +31,11 @@ _SMALL_R = 1e-8
 class PinholeEquidistant(_Pinhole):
     """Pinhole camera with Kannala-Brandt equidistant distortion (``cv2.fisheye``, k1..k4).
 
+    Image size and intrinsics are the pinhole's (``width``, ``height``, ``fx``, ``fy``, ``cx``,
+    ``cy`` in pixels, top-left pixel center at ``(0, 0)``); the fisheye adds its four terms.
+
     Attributes
     ----------
-    width, height : int
-        Image size in pixels.
-    fx, fy : float
-        Focal lengths in pixels (> 0).
-    cx, cy : float
-        Principal point in pixels (top-left pixel center at ``(0, 0)``).
     k1, k2, k3, k4 : float
         Distortion coefficients of the angle polynomial.
 
@@ -63,25 +59,7 @@ class PinholeEquidistant(_Pinhole):
     distortion_model: ClassVar[str] = "equidistant"
     _ROS_MODEL: ClassVar[str] = "equidistant"
     _COEFFS: ClassVar[tuple[str, ...]] = ("k1", "k2", "k3", "k4")
-
-    @classmethod
-    def from_opencv(
-        cls, K: npt.ArrayLike, D: npt.ArrayLike, image_size: tuple[int, int]
-    ) -> PinholeEquidistant:
-        """Build from ``cv2.fisheye``'s ``K``, ``D`` (4 values) and ``(width, height)``.
-
-        Raises
-        ------
-        CameraModelError
-            If ``K`` is not a zero-skew 3x3 camera matrix or ``D`` does not hold 4 values.
-        """
-        fx, fy, cx, cy = _fields.camera_matrix_values(K, "K")
-        k = _fields.float_list(np.ravel(D), "D", (4,), "equidistant")
-        width, height = image_size
-        return cls(
-            width=width, height=height, fx=fx, fy=fy, cx=cx, cy=cy,
-            k1=k[0], k2=k[1], k3=k[2], k4=k[3],
-        )  # fmt: skip
+    _OPENCV_D: ClassVar[tuple[str, tuple[int, ...]]] = ("D", (4,))
 
     def _radial_coeffs(self) -> _radial.Coeffs:
         return (self.k1, self.k2, self.k3, self.k4)

@@ -15,10 +15,9 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
-import numpy.typing as npt
 
 from tagloc._types import FloatArray
-from tagloc.camera import _fields, _radial
+from tagloc.camera import _radial
 from tagloc.camera._pinhole import Distorted, _Pinhole
 
 #: Largest accepted residual |d(x) - xd| of an undistorted point (normalized units; 1e-7 px at
@@ -31,14 +30,11 @@ _NEWTON_ITER = 20
 class PinholeRadtan(_Pinhole):
     """Pinhole camera with radial (k1, k2, k3) and tangential (p1, p2) distortion.
 
+    ``width``, ``height``, ``fx``, ``fy``, ``cx`` and ``cy`` (pixels) are the intrinsics every
+    model shares; below, what this one adds.
+
     Attributes
     ----------
-    width, height : int
-        Image size in pixels.
-    fx, fy : float
-        Focal lengths in pixels (> 0).
-    cx, cy : float
-        Principal point in pixels (top-left pixel center at ``(0, 0)``).
     k1, k2, p1, p2, k3 : float
         Distortion coefficients in OpenCV's order (``k3 = 0`` for a 4-coefficient calibration,
         as Kalibr's ``radtan``).
@@ -68,25 +64,7 @@ class PinholeRadtan(_Pinhole):
     distortion_model: ClassVar[str] = "radtan"
     _ROS_MODEL: ClassVar[str] = "plumb_bob"
     _COEFFS: ClassVar[tuple[str, ...]] = ("k1", "k2", "p1", "p2", "k3")
-
-    @classmethod
-    def from_opencv(
-        cls, K: npt.ArrayLike, dist_coeffs: npt.ArrayLike, image_size: tuple[int, int]
-    ) -> PinholeRadtan:
-        """Build from OpenCV's ``cameraMatrix``, ``distCoeffs`` (4 or 5) and ``(width, height)``.
-
-        Raises
-        ------
-        CameraModelError
-            If ``K`` is not a zero-skew 3x3 camera matrix or ``dist_coeffs`` has another length.
-        """
-        fx, fy, cx, cy = _fields.camera_matrix_values(K, "K")
-        k = _fields.float_list(np.ravel(dist_coeffs), "dist_coeffs", (4, 5), "radtan")
-        width, height = image_size
-        return cls(
-            width=width, height=height, fx=fx, fy=fy, cx=cx, cy=cy,
-            k1=k[0], k2=k[1], p1=k[2], p2=k[3], k3=k[4] if len(k) == 5 else 0.0,
-        )  # fmt: skip
+    _OPENCV_D: ClassVar[tuple[str, tuple[int, ...]]] = ("dist_coeffs", (4, 5))
 
     def _radial_coeffs(self) -> _radial.Coeffs:
         return (self.k1, self.k2, self.k3, 0.0)
