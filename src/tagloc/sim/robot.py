@@ -134,35 +134,13 @@ class Camera(StrictModel):
 
     def camera_model(self) -> CameraModel:
         """This camera as a :mod:`tagloc.camera` model (``K``, project, undistort, rays)."""
-        i, coeffs = self.intrinsics, self.distortion.coefficients
+        pinhole = self.intrinsics.model_dump()  # width, height, fx, fy, cx, cy
+        coeffs = self.distortion.coefficients
         if self.distortion.model == "equidistant":
             k1, k2, k3, k4 = coeffs
-            return PinholeEquidistant(
-                width=i.width,
-                height=i.height,
-                fx=i.fx,
-                fy=i.fy,
-                cx=i.cx,
-                cy=i.cy,
-                k1=k1,
-                k2=k2,
-                k3=k3,
-                k4=k4,
-            )
+            return PinholeEquidistant(**pinhole, k1=k1, k2=k2, k3=k3, k4=k4)
         k1, k2, p1, p2, k3 = (*coeffs, 0.0)[:5] if coeffs else (0.0,) * 5
-        return PinholeRadtan(
-            width=i.width,
-            height=i.height,
-            fx=i.fx,
-            fy=i.fy,
-            cx=i.cx,
-            cy=i.cy,
-            k1=k1,
-            k2=k2,
-            p1=p1,
-            p2=p2,
-            k3=k3,
-        )
+        return PinholeRadtan(**pinhole, k1=k1, k2=k2, p1=p1, p2=p2, k3=k3)
 
 
 class LidarMount(Mount):
