@@ -32,8 +32,8 @@ sigmas towards the other branch: the tilt information grows like ``sin^2`` of th
 Once the policy knows the posterior odds of the branches, :func:`ambiguity_mixture` folds in the
 other branch: the second moment about the chosen pose of the two-branch mixture.
 
-Plus the covariance of the derived ``T_map_cam`` / ``T_map_base`` (:func:`map_cam_from_tag`,
-:func:`map_base_from_cam`) through :mod:`tagloc.geometry.covariance`, and :func:`nees`.
+The covariance of the derived ``T_map_cam`` / ``T_map_base`` and :func:`nees` are in
+:mod:`tagloc.tags.pose_chain` (re-exported here).
 """
 
 from __future__ import annotations
@@ -48,8 +48,15 @@ from pydantic import Field, field_validator
 
 from tagloc._types import FloatArray
 from tagloc.config import StrictModel
-from tagloc.geometry import SE3, cov_compose, cov_inverse, se3_right_jacobian_inv
+from tagloc.geometry import SE3, se3_right_jacobian_inv
 from tagloc.geometry.small_batch import row_norms
+from tagloc.tags.pose_chain import map_base_from_cam, map_cam_from_tag, nees
+
+__all__ = [
+    "MIN_SIGMA_PX", "Linearization", "NoiseModel", "ambiguity_mixture", "ambiguity_weight",
+    "laplace_covariance", "linearized_pose_covariance", "map_base_from_cam", "map_cam_from_tag",
+    "nees", "pose_covariance", "reprojection_covariance", "second_order_term", "valley_term",
+]  # fmt: skip
 
 _EPS = np.zeros((3, 3, 3))
 _EPS[0, 1, 2] = _EPS[1, 2, 0] = _EPS[2, 0, 1] = 1.0
@@ -383,78 +390,3 @@ def ambiguity_mixture(
     J = se3_right_jacobian_inv(delta)
     other = J @ np.asarray(cov_other, dtype=np.float64) @ J.T + np.outer(delta, delta)
     return _sym((1.0 - w) * C + w * other)
-
-
-def map_cam_from_tag(
-    T_cam_tag: SE3,
-    cov_cam_tag: npt.ArrayLike,
-    T_map_tag: SE3,
-    cov_map_tag: npt.ArrayLike | None = None,
-) -> tuple[SE3, FloatArray]:
-    """``T_map_cam = T_map_tag @ T_cam_tag^-1`` with its right-tangent covariance.
-
-    Parameters
-    ----------
-    T_cam_tag : SE3
-    cov_cam_tag : (6, 6) float, right tangent of ``T_cam_tag``
-    T_map_tag : SE3
-        The tag's surveyed pose.
-    cov_map_tag : (6, 6) float, optional
-        Survey uncertainty of the tag (right tangent); zero by default.
-
-    Returns
-    -------
-    T_map_cam : SE3
-    cov_map_cam : (6, 6) float, right tangent of ``T_map_cam`` (``[x, y, z, rx, ry, rz]``)
-    """
-    T_tag_cam = T_cam_tag.inverse()
-    cov_tag_cam = cov_inverse(T_cam_tag, cov_cam_tag)
-    if cov_map_tag is None:  # cov_compose(T_map_tag, 0, T_tag_cam, C) is C (symmetric) exactly
-        return T_map_tag @ T_tag_cam, cov_tag_cam
-    return T_map_tag @ T_tag_cam, cov_compose(T_map_tag, cov_map_tag, T_tag_cam, cov_tag_cam)
-
-
-def map_base_from_cam(
-    T_map_cam: SE3,
-    cov_map_cam: npt.ArrayLike,
-    T_base_cam: SE3,
-    cov_base_cam: npt.ArrayLike | None = None,
-) -> tuple[SE3, FloatArray]:
-    """``T_map_base = T_map_cam @ T_base_cam^-1`` with its right-tangent covariance.
-
-    Parameters
-    ----------
-    T_map_cam : SE3
-    cov_map_cam : (6, 6) float
-    T_base_cam : SE3
-        Static extrinsics (camera optical frame in the robot base frame).
-    cov_base_cam : (6, 6) float, optional
-        Extrinsics calibration uncertainty; zero by default.
-
-    Returns
-    -------
-    T_map_base : SE3
-    cov_map_base : (6, 6) float, right tangent of ``T_map_base``
-    """
-    T_cam_base = T_base_cam.inverse()
-    c_ext = np.zeros((6, 6)) if cov_base_cam is None else cov_inverse(T_base_cam, cov_base_cam)
-    return T_map_cam @ T_cam_base, cov_compose(T_map_cam, cov_map_cam, T_cam_base, c_ext)
-
-
-def nees(T_true: SE3, T_est: SE3, cov_est: npt.ArrayLike) -> FloatArray:
-    """Normalized estimation error squared ``e^T C^-1 e``, ``e = Log(T_true^-1 @ T_est)``.
-
-    Parameters
-    ----------
-    T_true, T_est : SE3, single or batches of N
-    cov_est : (6, 6) or (N, 6, 6) float, right tangent of ``T_est``
-
-    Returns
-    -------
-    () or (N,) float
-        Chi-square with 6 dof (mean 6) when ``cov_est`` is honest.
-    """
-    e = np.asarray(T_est.minus(T_true))
-    C = np.asarray(cov_est, dtype=np.float64)
-    x = np.linalg.solve(C, e[..., None])[..., 0]
-    return np.asarray(np.einsum("...i,...i->...", e, x))
