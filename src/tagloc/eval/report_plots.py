@@ -7,12 +7,14 @@ baseline grey.
 from __future__ import annotations
 
 import io
+import os
 from typing import Any
 
 import numpy as np
 
 from tagloc.eval.fixstats import AcceptanceBin
 from tagloc.eval.summary import Evaluation
+from tagloc.fileutil import atomic_path
 
 COLORS = {"truth": "tab:green", "odometry": "tab:red", "fused": "tab:blue", "baseline": "0.45"}
 _MAX_POINTS = 6000  # plotted samples per series (decimated evenly)
@@ -33,6 +35,24 @@ def _png(fig: Any) -> bytes:
     fig.savefig(buffer, format="png")
     pyplot().close(fig)
     return buffer.getvalue()
+
+
+def save_png(fig: Any, path: str | os.PathLike[str], dpi: float | None = None) -> None:
+    """Lay ``fig`` out tightly, write it to the PNG ``path`` atomically, and close it."""
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=dpi)
+    pyplot().close(fig)
+
+
+def _finish(fig: Any, ax: Any, xlabel: str, ylabel: str) -> bytes:
+    """Label the axes, add the legend and grid, and return the figure as PNG bytes."""
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.legend(fontsize=8)
+    ax.grid(True, alpha=0.3)
+    fig.tight_layout()
+    return _png(fig)
 
 
 def _every(n: int) -> slice:
@@ -103,12 +123,7 @@ def error_histogram_png(ev: Evaluation) -> bytes:
         ax.hist(values, bins=bins, color=COLORS[name], alpha=0.6, label=name)
     ax.axvline(ev.summary.config.position_tol_m, color="k", linestyle=":", label="X tolerance")
     ax.set_xscale("log")
-    ax.set_xlabel("position error (m)")
-    ax.set_ylabel("odometry stamps")
-    ax.legend(fontsize=8)
-    ax.grid(True, alpha=0.3)
-    fig.tight_layout()
-    return _png(fig)
+    return _finish(fig, ax, "position error (m)", "odometry stamps")
 
 
 def acceptance_png(ev: Evaluation) -> bytes:
@@ -152,12 +167,7 @@ def jumps_png(ev: Evaluation) -> bytes:
     cap = ev.summary.cap_translation_m
     if np.isfinite(cap):
         ax.axhline(cap, color="k", linestyle=":", label="cap per update")
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("correction jump (m)")
-    ax.legend(fontsize=8)
-    ax.grid(True, alpha=0.3)
-    fig.tight_layout()
-    return _png(fig)
+    return _finish(fig, ax, "time (s)", "correction jump (m)")
 
 
 def ladder_png(ev: Evaluation) -> bytes:

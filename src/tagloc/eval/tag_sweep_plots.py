@@ -13,9 +13,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from tagloc.eval.report_plots import pyplot
+from tagloc.eval.report_plots import pyplot, save_png
 from tagloc.eval.tag_sweep_stats import TagSweepRow, conditions
-from tagloc.fileutil import atomic_path
 
 
 def _label(blur: float, noise: float) -> str:
@@ -53,26 +52,16 @@ def plot_tag_sweep_errors(rows: Sequence[TagSweepRow], path: str | os.PathLike[s
             ax.set_title(_label(blur, noise), fontsize=9)
             ax.grid(True, which="both", alpha=0.3)
     axes[0, 1].legend(title="view angle", fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1))
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=100)
-    plt.close(fig)
+    save_png(fig, path, dpi=100)
 
 
 def plot_tag_sweep_rates(rows: Sequence[TagSweepRow], path: str | os.PathLike[str]) -> None:
-    """Detection and acceptance rate heatmaps (distance x angle), one row per condition.
-
-    Parameters
-    ----------
-    rows : sequence of TagSweepRow
-    path : path-like
-        Output PNG, written atomically.
-    """
-    plt = pyplot()
+    """Detection and acceptance rate heatmaps (distance x angle), one row per condition of
+    ``rows``; the PNG ``path`` is written atomically."""
     conds = conditions(rows)
     distances = sorted({r.distance_m for r in rows})
     angles = sorted({r.angle_deg for r in rows})
-    fig, axes = plt.subplots(
+    fig, axes = pyplot().subplots(
         len(conds), 2, figsize=(10, 0.5 + 0.45 * len(distances) * len(conds)), squeeze=False
     )
     for i, (blur, noise) in enumerate(conds):
@@ -91,7 +80,4 @@ def plot_tag_sweep_rates(rows: Sequence[TagSweepRow], path: str | os.PathLike[st
             ax.set_xlabel("view angle (deg)")
             ax.set_ylabel("distance (m)")
             ax.set_title(f"{name.replace('_', ' ')}: {_label(blur, noise)}", fontsize=9)
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=100)
-    plt.close(fig)
+    save_png(fig, path, dpi=100)
