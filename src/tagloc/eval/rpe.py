@@ -126,11 +126,7 @@ def _summarize(
 
 
 def relative_pose_error(
-    stamps_ns: npt.NDArray[np.int64],
-    T_map_base_ref: SE3,
-    T_map_base_est: SE3,
-    *,
-    delta_m: float = 1.0,
+    stamps_ns: IntArray, T_map_base_ref: SE3, T_map_base_est: SE3, *, delta_m: float = 1.0
 ) -> RelativeError | None:
     """RPE per ``delta_m`` metres of reference path (pairs by distance, module docstring).
 
@@ -152,29 +148,29 @@ def relative_pose_error(
     EvaluationError
         Lengths differ or ``delta_m`` is not a finite positive number.
     """
-    stamps = np.asarray(stamps_ns, dtype=np.int64)
-    _check(stamps, T_map_base_ref, T_map_base_est, delta_m, "m")
-    pairs = pairs_by_path(T_map_base_ref.translation, delta_m)
-    return _summarize(pairs, T_map_base_ref, T_map_base_est, delta_m, math.nan)
+    return _relative_error(stamps_ns, T_map_base_ref, T_map_base_est, delta_m, "m")
 
 
 def relative_pose_error_per_time(
-    stamps_ns: npt.NDArray[np.int64],
-    T_map_base_ref: SE3,
-    T_map_base_est: SE3,
-    *,
-    delta_s: float = 1.0,
+    stamps_ns: IntArray, T_map_base_ref: SE3, T_map_base_est: SE3, *, delta_s: float = 1.0
 ) -> RelativeError | None:
     """RPE per ``delta_s`` seconds (pairs by time, module docstring); None if the run is shorter.
 
-    Raises
-    ------
-    EvaluationError
-        Lengths differ, stamps are not increasing, or ``delta_s`` is not finite and positive.
+    Raises ``EvaluationError`` where lengths differ, stamps are not increasing, or ``delta_s`` is
+    not finite and positive.
     """
+    return _relative_error(stamps_ns, T_map_base_ref, T_map_base_est, delta_s, "s")
+
+
+def _relative_error(
+    stamps_ns: IntArray, T_ref: SE3, T_est: SE3, delta: float, unit: str
+) -> RelativeError | None:
+    """Pairs ``delta`` metres (``unit`` ``"m"``) or seconds (``"s"``) apart, summarized."""
     stamps = np.asarray(stamps_ns, dtype=np.int64)
-    _check(stamps, T_map_base_ref, T_map_base_est, delta_s, "s")
+    _check(stamps, T_ref, T_est, delta, unit)
+    if unit == "m":
+        return _summarize(pairs_by_path(T_ref.translation, delta), T_ref, T_est, delta, math.nan)
     if np.any(np.diff(stamps) < 0):
         raise EvaluationError("relative_pose_error_per_time: stamps are not increasing")
-    pairs = pairs_by_time(stamps, round(delta_s * 1e9))
-    return _summarize(pairs, T_map_base_ref, T_map_base_est, math.nan, delta_s)
+    pairs = pairs_by_time(stamps, round(delta * 1e9))
+    return _summarize(pairs, T_ref, T_est, math.nan, delta)
