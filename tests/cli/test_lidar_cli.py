@@ -71,12 +71,12 @@ def test_a_laser_scan_on_the_lidar_topic_is_a_counted_skip_without_a_premap(
     sys.path.insert(0, str(Path(__file__).parents[1] / "io"))
     from test_bag_errors import raw_bag
 
-    from tagloc.io.bag_writer import _Encoder
+    from tagloc.io.encode import RosEncoder
     from tagloc.sim.scenarios import ScenarioSource
     from tagloc.tags import save_tag_map
 
     scenario = build_scenario("default", seed=2, duration_s=6.0)
-    enc = _Encoder(2)
+    enc = RosEncoder(2)
     scan_type = enc.store.types["sensor_msgs/msg/LaserScan"]
     ranges, intensities = np.full(300, 5.0, np.float32), np.zeros(300, np.float32)
     items, scans = [], 0

@@ -23,10 +23,10 @@ from hypothesis import strategies as st
 
 from tagloc.errors import TaglocError
 from tagloc.io import PointCloudMsg
-from tagloc.io.bag_writer import _Encoder
 from tagloc.io.convert import decode
 from tagloc.io.convert_cloud import MAX_SWEEP_SPAN_S
 from tagloc.io.decoded import Bad, DecodeOptions
+from tagloc.io.encode import RosEncoder
 from tagloc.io.map_server import read_map_server, write_map_server
 from tagloc.io.pointcloud_files import (
     MAX_COORDINATE_M,
@@ -98,7 +98,7 @@ def _damaged_cloud(data: st.DataObject) -> Any:
     n = data.draw(st.integers(0, 40), label="n")
     offsets = np.sort(rng.uniform(0, 0.1, n)).astype(np.float32)
     msg = PointCloudMsg(10**18, "lidar", rng.normal(size=(n, 3)).astype(np.float32), None, offsets)
-    ros = _Encoder(2).encode(msg, 0)
+    ros = RosEncoder(2).encode(msg, 0)
     for change in data.draw(st.lists(FIELD_CHANGES, min_size=1, max_size=3), label="changes"):
         if change in ("height", "width", "point_step", "row_step"):
             setattr(ros, change, data.draw(HUGE, label=change))

@@ -29,12 +29,12 @@ from tagloc.io import (
     TagDetectionsMsg,
     TransformMsg,
 )
-from tagloc.io.bag_writer import _Encoder
 from tagloc.io.convert import make_typestore
+from tagloc.io.encode import RosEncoder
 from tagloc.tags.detection import TagDetection
 
 S = 1_000_000_000
-ENC = _Encoder(2)
+ENC = RosEncoder(2)
 SQUARE = np.array([[10.0, 10.0], [30.0, 10.0], [30.0, 30.0], [10.0, 30.0]])  # tl, tr, br, bl
 
 

@@ -16,7 +16,7 @@ from test_bag_errors import raw_bag
 from test_bag_roundtrip import FORMATS
 
 from tagloc.io import BagFormatError, BagSink, BagSource, PointCloudMsg, RecordError
-from tagloc.io.bag_writer import _Encoder
+from tagloc.io.encode import RosEncoder
 
 S = 1_000_000_000
 PC2 = "sensor_msgs/msg/PointCloud2"
@@ -57,7 +57,7 @@ def test_point_clouds_round_trip(tmp_path: Path, fmt: Any, kw: dict[str, Any], n
 
 
 def encoded(msg: PointCloudMsg) -> Any:
-    return _Encoder(2).encode(msg, 0)
+    return RosEncoder(2).encode(msg, 0)
 
 
 def relayout(msg: PointCloudMsg, fields: list[tuple[str, str, Any]], bigendian: bool) -> Any:
