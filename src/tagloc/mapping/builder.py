@@ -76,7 +76,7 @@ from tagloc.mapping.initialize import (
 from tagloc.mapping.lidar_survey import prepare_lidar, sequential_factors
 from tagloc.mapping.map_qa import graph_records, map_and_report
 from tagloc.mapping.observations import Observations, collect_observations
-from tagloc.mapping.refine import Priors, State, refine_and_test_tilts
+from tagloc.mapping.refine import Priors, RefineInputs, State, refine_and_test_tilts
 from tagloc.mapping.report import BuildReport
 from tagloc.mapping.scan_factors import RelativePoseFactors, scan_scale
 from tagloc.mapping.scan_odometry import scan_odometry
@@ -262,18 +262,9 @@ def build_tag_map(
         held = held_tags(M_anchor, obs.tag, M_map_tag)
         state = State(M_map_base, M_map_tag, calibration_vector(calibration))
         if config.factors == "corners":
-            solution, state, ambiguous = refine_and_test_tilts(
-                obs,
-                M_odom_raw,
-                state,
-                held,
-                set(M_anchor),
-                survey.cameras,
-                survey.T_base_cam,
-                config,
-                priors,
-                relative,
-            )
+            inputs = RefineInputs(obs, M_odom_raw, held, survey.cameras, survey.T_base_cam,
+                                  config, priors, relative)  # fmt: skip
+            solution, state, ambiguous = refine_and_test_tilts(inputs, state, set(M_anchor))
             iterations += solution.iterations
             optimize_s += solution.optimize_s
             logger.info("odometry calibration: %s", calibration_from_vector(state.c))
