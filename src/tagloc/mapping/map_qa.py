@@ -22,14 +22,8 @@ from tagloc.mapping.graph_export import GraphAtSolution, factor_records
 from tagloc.mapping.observations import Observations
 from tagloc.mapping.odometry_noise import odometry_whitening
 from tagloc.mapping.refine import Priors
-from tagloc.mapping.report import (
-    BuildReport,
-    TagQA,
-    corner_residuals_px,
-    reprojection_residuals,
-    rms,
-    tag_sigmas,
-)
+from tagloc.mapping.report import BuildReport, TagQA, tag_sigmas
+from tagloc.mapping.residuals import corner_residuals_px, observation_rms_px, rms
 from tagloc.mapping.scan_factors import RelativePoseFactors
 from tagloc.mapping.survey import Survey
 from tagloc.tags.tagmap import TagEntry, TagMap
@@ -72,9 +66,9 @@ def map_and_report(
 ) -> tuple[TagMap, BuildReport]:
     """The tag map (every tag with its marginal covariance and a note) and the QA report
     (per-tag numbers, uncertain tags with advice: :mod:`tagloc.mapping.advice`)."""
-    residual = reprojection_residuals(
+    residual = observation_rms_px(corner_residuals_px(
         obs, solution.M_map_base, solution.M_map_tag, survey.cameras, survey.T_base_cam
-    )
+    ))  # fmt: skip
     outlier = solution.mahalanobis > config.outlier_sigma
     cams = np.array(obs.camera)
     entries, qa = [], []

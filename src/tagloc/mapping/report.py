@@ -19,10 +19,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tagloc._types import FloatArray
-from tagloc.camera import CameraModel
-from tagloc.geometry import SE3, inverse_h
-from tagloc.mapping.observations import Observations
-from tagloc.tags.detection import tag_object_points
+from tagloc.geometry import SE3
 
 
 @dataclass(frozen=True, slots=True)
@@ -251,52 +248,6 @@ class BuildReport:
                 f"{' '.join(t.cameras)} | {note.strip()} |"
             )
         return "\n".join(lines) + "\n"
-
-
-def reprojection_residuals(
-    obs: Observations,
-    M_map_base: FloatArray,
-    M_map_tag: Mapping[int, FloatArray],
-    cameras: Mapping[str, CameraModel],
-    T_base_cam: Mapping[str, SE3],
-) -> FloatArray:
-    """``(M,)`` RMS corner reprojection residual of each observation at the given poses, px."""
-    err = np.linalg.norm(
-        corner_residuals_px(obs, M_map_base, M_map_tag, cameras, T_base_cam), axis=2
-    )
-    return np.asarray(np.sqrt(np.mean(err**2, axis=1)))
-
-
-def corner_residuals_px(
-    obs: Observations,
-    M_map_base: FloatArray,
-    M_map_tag: Mapping[int, FloatArray],
-    cameras: Mapping[str, CameraModel],
-    T_base_cam: Mapping[str, SE3],
-) -> FloatArray:
-    """``(M, 4, 2)`` projected minus detected corners of each observation at the given poses, px
-    (NaN where a corner does not project)."""
-    out = np.full((len(obs), 4, 2), np.nan)
-    cams = np.array(obs.camera)
-    tags = np.array([M_map_tag[int(j)] for j in obs.tag])
-    M_base_tag = inverse_h(M_map_base[obs.keyframe]) @ tags
-    for name in np.unique(cams):
-        idx = np.flatnonzero(cams == name)
-        M_cam_tag = inverse_h(T_base_cam[str(name)].as_matrix())[None] @ M_base_tag[idx]
-        points_tag = tag_object_points(1.0)[None] * obs.tag_sizes[obs.tag[idx]][:, None, None]
-        points_cam = (
-            np.einsum("mij,mnj->mni", M_cam_tag[:, :3, :3], points_tag) + M_cam_tag[:, None, :3, 3]
-        )
-        with np.errstate(all="ignore"):
-            px = cameras[str(name)].project(points_cam.reshape(-1, 3)).reshape(-1, 4, 2)
-        out[idx] = px - obs.corners_px[idx]
-    return out
-
-
-def rms(values: FloatArray) -> float:
-    """Root mean square of the finite values (NaN if none)."""
-    v = values[np.isfinite(values)]
-    return float(np.sqrt(np.mean(v**2))) if len(v) else float("nan")
 
 
 def tag_sigmas(cov: Mapping[int, FloatArray]) -> tuple[dict[int, float], dict[int, float]]:
