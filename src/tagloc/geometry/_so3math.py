@@ -1,6 +1,7 @@
 """Vectorized SO(3) kernels on raw arrays: hat, Exp, the scalar coefficients, right Jacobians.
 
-Every function takes arrays with any leading batch shape ``...`` and works without Python loops.
+Every function takes arrays with any leading batch shape ``...`` and works without Python loops;
+a rotation vector ``phi`` is ``(..., 3)`` and a matrix ``(..., 3, 3)`` throughout.
 Nothing here validates its input: the public types do that once, at the boundary.
 
 Formulas: J. Sola, J. Deray, D. Atchuthan, "A micro Lie theory for state estimation in robotics"
@@ -45,16 +46,7 @@ def even_series(t2: FloatArray, coefficients: tuple[float, ...]) -> FloatArray:
 
 
 def hat(phi: FloatArray) -> FloatArray:
-    """Skew-symmetric matrix ``[phi]x`` with ``[phi]x v = phi x v``.
-
-    Parameters
-    ----------
-    phi : (..., 3) float
-
-    Returns
-    -------
-    (..., 3, 3) float
-    """
+    """Skew-symmetric matrix ``[phi]x`` with ``[phi]x v = phi x v``, ``(..., 3, 3)``."""
     out = np.zeros((*phi.shape[:-1], 3, 3))
     x, y, z = phi[..., 0], phi[..., 1], phi[..., 2]
     out[..., 0, 1] = -z
@@ -194,16 +186,7 @@ def exp(phi: FloatArray) -> FloatArray:
 
 
 def right_jacobian(phi: FloatArray) -> FloatArray:
-    """``Jr(phi) = I - (1 - cos t)/t^2 [phi]x + (t - sin t)/t^3 [phi]x^2`` (Sola App. B).
-
-    Parameters
-    ----------
-    phi : (..., 3) float
-
-    Returns
-    -------
-    (..., 3, 3) float
-    """
+    """``Jr(phi) = I - (1 - cos t)/t^2 [phi]x + (t - sin t)/t^3 [phi]x^2`` (Sola App. B)."""
     theta = angle(phi)
     skew = hat(phi)
     b = coeff_cos(theta)[..., None, None]

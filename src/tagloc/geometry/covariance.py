@@ -78,14 +78,7 @@ def cov_right_to_left(T: LieGroup, cov: npt.ArrayLike) -> FloatArray:
 def cov_left_to_right(T: LieGroup, cov: npt.ArrayLike) -> FloatArray:
     """Inverse of :func:`cov_right_to_left`: ``Ad_T^-1 C Ad_T^-T`` (parent frame -> body frame).
 
-    Parameters
-    ----------
-    T : SO3, SE3 or SE2 (single or batch of N)
-    cov : (d, d) or (N, d, d) float
-
-    Returns
-    -------
-    (d, d) or (N, d, d) float
+    Shapes as in :func:`cov_right_to_left`.
     """
     return _sym(_sandwich(T.inverse().adjoint(), _cov(T, cov, "cov")))
 
@@ -95,14 +88,7 @@ def cov_inverse(T: LieGroup, cov: npt.ArrayLike) -> FloatArray:
 
     ``J_{T^-1}_T = -Ad_T``, so e.g. the covariance of ``T_cam_tag`` from that of ``T_tag_cam``.
 
-    Parameters
-    ----------
-    T : SO3, SE3 or SE2 (single or batch of N)
-    cov : (d, d) or (N, d, d) float
-
-    Returns
-    -------
-    (d, d) or (N, d, d) float
+    Shapes as in :func:`cov_right_to_left`.
     """
     return _sym(_sandwich(T.adjoint(), _cov(T, cov, "cov")))
 
