@@ -53,26 +53,22 @@ def vectors(value: npt.ArrayLike, dim: int, name: str) -> FloatArray:
     GeometryError
         On a wrong shape, NaN or infinity.
     """
-    array = np.array(to_float_array(value, name), dtype=np.float64)
-    if array.ndim not in (1, 2) or array.shape[-1] != dim:
-        raise GeometryError(f"{name} must have shape ({dim},) or (N, {dim}), got {array.shape}")
-    check_finite(array, name)
-    return array
+    return _fresh_finite(value, name, (dim,), f"({dim},) or (N, {dim})")
 
 
 def matrices(value: npt.ArrayLike, dim: int, name: str) -> FloatArray:
-    """A finite ``(dim, dim)`` or ``(N, dim, dim)`` float array (a fresh copy).
+    """A finite ``(dim, dim)`` or ``(N, dim, dim)`` float array (a fresh copy); raises as
+    :func:`vectors`."""
+    return _fresh_finite(value, name, (dim, dim), f"({dim}, {dim}) or (N, {dim}, {dim})")
 
-    Raises
-    ------
-    GeometryError
-        On a wrong shape, NaN or infinity.
-    """
+
+def _fresh_finite(
+    value: npt.ArrayLike, name: str, item_shape: tuple[int, ...], expected: str
+) -> FloatArray:
     array = np.array(to_float_array(value, name), dtype=np.float64)
-    if array.ndim not in (2, 3) or array.shape[-2:] != (dim, dim):
-        raise GeometryError(
-            f"{name} must have shape ({dim}, {dim}) or (N, {dim}, {dim}), got {array.shape}"
-        )
+    n = len(item_shape)
+    if array.ndim not in (n, n + 1) or array.shape[-n:] != item_shape:
+        raise GeometryError(f"{name} must have shape {expected}, got {array.shape}")
     check_finite(array, name)
     return array
 
