@@ -123,14 +123,10 @@ class TransformBuffer:
         stamp = _validate.stamp(stamp_ns)
         values = _validate.single_pose(T_parent_child, parent, child)
         sample = [*_kernels.quat_from_matrix(values[:9]), *values[9:]]
-        edge = self._edges.get(child)
-        if isinstance(edge, DynamicEdge) and edge.parent == parent:
-            edge.insert(stamp, sample, self._window)
-            return
-        self._check_attach(parent, child, dynamic=True)
-        new_edge = DynamicEdge(parent, child)
-        new_edge.insert(stamp, sample, self._window)
-        self._attach(new_edge)
+        edge, new = self._edge_to_fill(parent, child)
+        edge.insert(stamp, sample, self._window)
+        if new:
+            self._attach(edge)
 
     def set_transforms(
         self, parent: str, child: str, stamps_ns: npt.ArrayLike, T_parent_child: SE3
@@ -153,14 +149,10 @@ class TransformBuffer:
         poses = _validate.pose_batch(T_parent_child, len(stamps), parent, child)
         quats = np.reshape(poses.rotation.as_quat(), (-1, 4))
         samples = np.concatenate([quats, np.reshape(poses.translation, (-1, 3))], axis=1)
-        edge = self._edges.get(child)
-        if isinstance(edge, DynamicEdge) and edge.parent == parent:
-            edge.insert_many(stamps, samples, self._window)
-            return
-        self._check_attach(parent, child, dynamic=True)
-        new_edge = DynamicEdge(parent, child)
-        new_edge.insert_many(stamps, samples, self._window)  # may raise: attach only after
-        self._attach(new_edge)
+        edge, new = self._edge_to_fill(parent, child)
+        edge.insert_many(stamps, samples, self._window)  # may raise: attach only after
+        if new:
+            self._attach(edge)
 
     def set_static(self, parent: str, child: str, T_parent_child: SE3) -> None:
         """Set the static edge ``parent -> child``, valid at every stamp. Setting it again
@@ -178,6 +170,15 @@ class TransformBuffer:
         if not (isinstance(edge, StaticEdge) and edge.parent == parent):
             self._check_attach(parent, child, dynamic=False)
         self._attach(StaticEdge(parent, child, value))
+
+    def _edge_to_fill(self, parent: str, child: str) -> tuple[DynamicEdge, bool]:
+        """The dynamic edge ``parent -> child``, or a new one (checked, not yet attached: the
+        caller attaches it once its samples are in) and True."""
+        edge = self._edges.get(child)
+        if isinstance(edge, DynamicEdge) and edge.parent == parent:
+            return edge, False
+        self._check_attach(parent, child, dynamic=True)
+        return DynamicEdge(parent, child), True
 
     def _check_attach(self, parent: str, child: str, *, dynamic: bool) -> None:
         """Raise unless a new edge ``parent -> child`` keeps the frames a tree (a forest)."""
