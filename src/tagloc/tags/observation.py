@@ -18,7 +18,6 @@ Steps (each rejection is a counted :class:`~tagloc.tags.gates.Rejection`, never 
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections import Counter
 from collections.abc import Mapping, Sequence
@@ -26,71 +25,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tagloc._types import FloatArray
 from tagloc.camera import CameraModel
 from tagloc.geometry import SE3
 from tagloc.tags._frame import estimate_frame, joint_rows
-from tagloc.tags.covariance import NoiseModel, ambiguity_mixture, map_base_from_cam
+from tagloc.tags.branch_choice import PosePrior, decide_joint, decide_tag, evidences
+from tagloc.tags.covariance import NoiseModel
 from tagloc.tags.detection import TagDetection
 from tagloc.tags.gates import (
     GateConfig,
-    OrientationPrior,
-    PriorEvidence,
     Rejection,
     RejectReason,
     check_detection,
     check_estimate,
-    prior_evidences,
-    resolve_ambiguity,
 )
 from tagloc.tags.pnp import JointPoseEstimate, TagPoseEstimate, estimate_joint_pose
 
-_E_Z = np.array([0.0, 0.0, 1.0])
-
-
-@dataclass(frozen=True, slots=True)
-class PosePrior:
-    """What is known of the camera's orientation before this frame (for the ambiguity policy).
-
-    Attributes
-    ----------
-    T_map_cam : SE3 or None
-        Predicted camera pose (e.g. the fusion filter's), of which only the rotation is used.
-    rotation_sigma_rad : float
-        Per-axis 1-sigma of that rotation (default 0.05 rad = 2.9 deg).
-    up_cam : (3,) float or None
-        The map's up direction (``+z``) in the camera frame; :meth:`upright` derives it.
-    up_sigma_rad : float
-        1-sigma of ``up_cam`` (robot tilt; default 0.05 rad).
-    """
-
-    T_map_cam: SE3 | None = None
-    rotation_sigma_rad: float = 0.05
-    up_cam: FloatArray | None = None
-    up_sigma_rad: float = 0.05
-
-    @classmethod
-    def upright(
-        cls,
-        T_base_cam: SE3,
-        up_sigma_rad: float = 0.05,
-        T_map_cam: SE3 | None = None,
-        rotation_sigma_rad: float = 0.05,
-    ) -> PosePrior:
-        """Gravity prior of an upright robot (base ``+z`` = map up, REP-103): ``R_base_cam^T
-        e_z``; optionally with a predicted ``T_map_cam``."""
-        up_cam = T_base_cam.rotation.inverse().act(_E_Z)
-        return cls(T_map_cam, rotation_sigma_rad, up_cam, up_sigma_rad)
-
-    def for_object(self, R_map_obj: FloatArray | None, up_obj: FloatArray) -> OrientationPrior:
-        """The :class:`OrientationPrior` of ``R_cam_obj`` for an object of map rotation
-        ``R_map_obj`` (None if unknown: gravity only) whose up axis is ``up_obj``."""
-        R_cam_obj = None
-        if self.T_map_cam is not None and R_map_obj is not None:
-            R_cam_obj = self.T_map_cam.rotation.matrix.T @ R_map_obj
-        return OrientationPrior(
-            R_cam_obj, self.rotation_sigma_rad, self.up_cam, up_obj, self.up_sigma_rad
-        )
+__all__ = ["ObservationResult", "PosePrior", "observe_tags"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -122,124 +72,6 @@ def _size_of(tag_sizes: Mapping[int, float] | float, tag_id: int) -> float | Non
         size = tag_sizes.get(tag_id)
         return None if size is None else float(size)
     return float(tag_sizes)
-
-
-def _tag_prior(prior: PosePrior, T_map_tag: SE3 | None) -> OrientationPrior:
-    """The prior of one tag: its map rotation and up axis if surveyed, else upright (``+y``)."""
-    if T_map_tag is None:
-        return prior.for_object(None, np.array([0.0, 1.0, 0.0]))
-    R_map_tag = T_map_tag.rotation.matrix
-    return prior.for_object(R_map_tag, R_map_tag[2].copy())  # R_map_tag^T e_z
-
-
-def _evidences(
-    prior: PosePrior | None,
-    tag_poses: Mapping[int, SE3] | None,
-    estimates: Sequence[TagPoseEstimate],
-    joint: JointPoseEstimate | None,
-) -> tuple[list[PriorEvidence | None], PriorEvidence | None]:
-    """The prior's evidence on both branches of every estimate and of the joint one (whose
-    ``obj`` is the map), in one numpy pass."""
-    if prior is None:
-        return [None] * len(estimates), None
-    priors = [
-        _tag_prior(prior, None if tag_poses is None else tag_poses[est.tag_id]) for est in estimates
-    ]
-    R_best = [e.T_cam_tag.rotation.matrix for e in estimates]
-    R_alt = [e.T_cam_tag_alt.rotation.matrix for e in estimates]
-    laplace_best = [e.cov_rot_laplace for e in estimates]
-    laplace_alt = [e.cov_rot_laplace_alt for e in estimates]
-    cov_best = [e.cov_cam_tag[3:, 3:] for e in estimates]
-    cov_alt = [e.cov_cam_tag_alt[3:, 3:] for e in estimates]
-    if joint is not None:
-        # R_cam_map's right tangent is -R_map_cam times T_map_cam's rotation tangent
-        R, R_j_alt = joint.T_map_cam.rotation.matrix, joint.T_map_cam_alt.rotation.matrix
-        priors.append(prior.for_object(np.eye(3), _E_Z))
-        R_best.append(R.T)
-        R_alt.append(R_j_alt.T)
-        laplace_best.append(joint.cov_rot_laplace)
-        laplace_alt.append(joint.cov_rot_laplace_alt)
-        cov_best.append(R @ joint.cov_map_cam[3:, 3:] @ R.T)
-        cov_alt.append(R_j_alt @ joint.cov_map_cam_alt[3:, 3:] @ R_j_alt.T)
-    evidence = prior_evidences(priors, R_best, R_alt, laplace_best, laplace_alt, cov_best, cov_alt)
-    tags: list[PriorEvidence | None] = list(evidence[: len(estimates)])
-    return tags, (evidence[-1] if joint is not None else None)
-
-
-def _decide_tag(
-    est: TagPoseEstimate, config: GateConfig, noise: NoiseModel, evidence: PriorEvidence | None
-) -> TagPoseEstimate | Rejection:
-    """Ambiguity policy, then the pose gates on the chosen branch (reprojection passed)."""
-    decision = resolve_ambiguity(
-        est.sse_px2,
-        est.sse_alt_px2,
-        noise.sigma_px,
-        config.ambiguity_log_odds,
-        evidence,
-        config.prior_gate_chi2,
-    )
-    if decision.reason is not None:
-        return Rejection(
-            est.tag_id,
-            decision.reason,
-            decision.detail,
-            decision.log_odds,
-            config.ambiguity_log_odds,
-        )
-    chosen = est.swapped() if decision.choose_alt else est
-    rejection = check_estimate(chosen, config)
-    if rejection is not None:
-        return rejection
-    cov = ambiguity_mixture(
-        chosen.T_cam_tag,
-        chosen.cov_cam_tag,
-        chosen.T_cam_tag_alt,
-        chosen.cov_cam_tag_alt,
-        decision.log_odds,
-    )
-    return chosen.with_covariance(cov)
-
-
-def _decide_joint(
-    joint: JointPoseEstimate,
-    config: GateConfig,
-    noise: NoiseModel,
-    evidence: PriorEvidence | None,
-    T_base_cam: SE3 | None,
-) -> JointPoseEstimate | Rejection:
-    """Reprojection gate and ambiguity policy of a joint estimate (``obj`` = the map)."""
-    if not joint.reproj_err_px <= config.max_reproj_err_px:
-        return Rejection(
-            None,
-            RejectReason.REPROJECTION,
-            f"joint reprojection error {joint.reproj_err_px:.3g} px "
-            f"(limit {config.max_reproj_err_px:.3g} px)",
-            joint.reproj_err_px,
-            config.max_reproj_err_px,
-        )
-    decision = resolve_ambiguity(
-        joint.sse_px2,
-        joint.sse_alt_px2,
-        noise.sigma_px,
-        config.ambiguity_log_odds,
-        evidence,
-        config.prior_gate_chi2,
-    )
-    if decision.reason is not None:
-        return Rejection(
-            None,
-            decision.reason,
-            f"joint: {decision.detail}",
-            decision.log_odds,
-            config.ambiguity_log_odds,
-        )
-    if not decision.choose_alt:
-        return joint
-    joint = joint.swapped()
-    if T_base_cam is None:
-        return joint
-    T_map_base, cov = map_base_from_cam(joint.T_map_cam, joint.cov_map_cam, T_base_cam)
-    return dataclasses.replace(joint, T_map_base=T_map_base, cov_map_base=cov)
 
 
 def observe_tags(
@@ -311,13 +143,13 @@ def observe_tags(
                 T_base_cam,
             )
     # 5. the prior on every tag that fits and on the joint estimate
-    evidences, joint_evidence = _evidences(prior, tag_poses, [est for _, est in fitted], result)
+    tag_evidence, joint_evidence = evidences(prior, tag_poses, [e for _, e in fitted], result)
     # 6. the policies: tags in detection order, then the joint estimate
     accepted: list[TagPoseEstimate] = []
     for outcome in outcomes:
         decided: TagPoseEstimate | Rejection
         if isinstance(outcome, int):
-            decided = _decide_tag(fitted[outcome][1], config, noise, evidences[outcome])
+            decided = decide_tag(fitted[outcome][1], config, noise, tag_evidence[outcome])
         else:
             decided = outcome
         if isinstance(decided, Rejection):
@@ -329,7 +161,7 @@ def observe_tags(
         if result is None:
             rejections.append(Rejection(None, RejectReason.DEGENERATE, "joint PnP failed"))
         else:
-            outcome_j = _decide_joint(result, config, noise, joint_evidence, T_base_cam)
+            outcome_j = decide_joint(result, config, noise, joint_evidence, T_base_cam)
             if isinstance(outcome_j, Rejection):
                 rejections.append(outcome_j)
             else:
