@@ -22,11 +22,10 @@ import numpy as np
 import numpy.typing as npt
 
 from tagloc.camera import CameraModel, from_camera_info
-from tagloc.config import parse_yaml, read_text_file
-from tagloc.errors import CameraModelError, ConfigError
+from tagloc.errors import CameraModelError
 from tagloc.fileutil import atomic_path
 from tagloc.io.errors import InputNotFoundError, TaglocIOError
-from tagloc.io.kalibr import load_kalibr_cameras
+from tagloc.io.kalibr import load_kalibr_cameras, read_camera_yaml
 
 __all__ = [
     "IMAGE_SUFFIXES",
@@ -100,11 +99,7 @@ def load_camera_file(path: str | os.PathLike[str]) -> CameraModel:
         One line naming the file and the field that is wrong or missing.
     """
     path = Path(path)
-    text = read_text_file(path, "the camera file", error=CameraModelError)
-    try:
-        data = parse_yaml(text, str(path))
-    except ConfigError as exc:
-        raise CameraModelError(str(exc)) from None
+    data = read_camera_yaml(path)
     if not isinstance(data, Mapping):
         raise CameraModelError(f"{path}: expected a camera calibration mapping")
     try:

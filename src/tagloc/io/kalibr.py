@@ -39,11 +39,7 @@ def load_kalibr_cameras(path: str | os.PathLike[str]) -> dict[str, CameraModel]:
         (``"cameras.yaml: cam0.distortion_coeffs: expected 4 values for equidistant, got 5"``).
     """
     path = Path(path)
-    text = read_text_file(path, "the camera file", error=CameraModelError)
-    try:
-        data = parse_yaml(text, str(path))
-    except ConfigError as exc:
-        raise CameraModelError(str(exc)) from None
+    data = read_camera_yaml(path)
     if not isinstance(data, Mapping) or not data:
         raise CameraModelError(
             f"{path}: expected a mapping of camera names (cam0, cam1, ...) to Kalibr camera "
@@ -56,3 +52,13 @@ def load_kalibr_cameras(path: str | os.PathLike[str]) -> dict[str, CameraModel]:
         except CameraModelError as exc:
             raise CameraModelError(f"{path}: {exc}") from exc
     return cameras
+
+
+def read_camera_yaml(path: Path) -> object:
+    """The YAML document of a camera file; a :class:`CameraModelError` naming the file where it
+    cannot be read or is not YAML."""
+    text = read_text_file(path, "the camera file", error=CameraModelError)
+    try:
+        return parse_yaml(text, str(path))
+    except ConfigError as exc:
+        raise CameraModelError(str(exc)) from None
