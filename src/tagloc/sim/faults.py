@@ -107,16 +107,9 @@ class _WindowFault:
 
 @dataclass(frozen=True, slots=True)
 class DropMessages(_WindowFault):
-    """Messages of ``kinds`` stamped in ``[start_s, end_s)`` are lost (a sensor unplugged, a
-    driver stalled).
-
-    Attributes
-    ----------
-    start_s, end_s : float
-        The silence, seconds after ``t0_ns``.
-    kinds : tuple of type
-        Record types dropped (empty: every record).
-    """
+    """Messages of ``kinds`` (record types; empty: every record) stamped in the silence
+    ``[start_s, end_s)``, seconds after ``t0_ns``, are lost (a sensor unplugged, a driver
+    stalled)."""
 
     def apply(self, stream: Stream, t0_ns: int) -> Iterator[tuple[str, Message]]:
         for topic, msg, hit in self._windowed(stream, t0_ns):
@@ -129,16 +122,8 @@ class DropMessages(_WindowFault):
 
 @dataclass(frozen=True, slots=True)
 class DuplicateMessages(_WindowFault):
-    """Every message of ``kinds`` stamped in ``[start_s, end_s)`` is delivered twice in a row
-    (a publisher started twice, a bag merged with itself).
-
-    Attributes
-    ----------
-    start_s, end_s : float
-        The stretch, seconds after ``t0_ns``.
-    kinds : tuple of type
-        Record types repeated (empty: every record).
-    """
+    """Every message of ``kinds`` stamped in ``[start_s, end_s)`` (as in :class:`DropMessages`)
+    is delivered twice in a row (a publisher started twice, a bag merged with itself)."""
 
     def apply(self, stream: Stream, t0_ns: int) -> Iterator[tuple[str, Message]]:
         for topic, msg, hit in self._windowed(stream, t0_ns):
