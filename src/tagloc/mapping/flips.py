@@ -32,7 +32,7 @@ from tagloc.camera import CameraModel
 from tagloc.geometry import SE3
 from tagloc.mapping.initialize import consensus_rotation, rotation_angle
 from tagloc.mapping.observations import Observations
-from tagloc.mapping.tag_fit import fit_tag_pose
+from tagloc.mapping.tag_fit import HeldViews, fit_tag_pose
 
 #: Optima closer than this (degrees) are the same tilt.
 SAME_DEG = 3.0
@@ -118,10 +118,11 @@ def flip_stuck_tags(
         view = np.mean((p_cam - M[:3, 3]) / np.linalg.norm(p_cam - M[:3, 3], axis=1)[:, None], 0)
         view /= max(float(np.linalg.norm(view)), 1e-12)
         fits = []
+        views = HeldViews(obs, idx, M_map_base, cameras, T_base_cam, sigma_px)
         for R_start in _candidates(np.asarray(M), implied_all[idx], view):
             M_start = np.array(M)
             M_start[:3, :3] = R_start
-            fits.append(fit_tag_pose(obs, idx, M_map_base, M_start, cameras, T_base_cam, sigma_px))
+            fits.append(fit_tag_pose(views, M_start))
         nll = np.array([f[1] for f in fits])
         best = int(np.argmin(nll))
         distinct = [

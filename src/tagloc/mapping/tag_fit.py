@@ -14,6 +14,7 @@ rz]``. Costs of two fits are comparable: their difference is a log-likelihood ra
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
@@ -39,44 +40,39 @@ def _nll(r: FloatArray) -> float:
     return float(np.sum(kernel_cost(corner_squares(r), "cauchy", KERNEL_K)))
 
 
-def fit_tag_pose(
-    obs: Observations,
-    idx: IntArray,
-    M_map_base: FloatArray,
-    M_map_tag: FloatArray,
-    cameras: Mapping[str, CameraModel],
-    T_base_cam: Mapping[str, SE3],
-    sigma_px: float,
-    max_iterations: int = 20,
-) -> tuple[FloatArray, float]:
-    """Fit ``T_map_tag`` of one tag to the corners of its observations ``idx`` (module docstring).
+@dataclass(frozen=True, slots=True)
+class HeldViews:
+    """One tag's observations ``idx`` (``(n,)`` int) of ``obs``, from the keyframes
+    ``M_map_base`` (``(K, 4, 4)``, held fixed), through the camera models and extrinsics by name,
+    with corner noise ``sigma_px`` (pixels per axis)."""
 
-    Parameters
-    ----------
-    obs : Observations
-    idx : (n,) int
-        Observations of the tag.
-    M_map_base : (K, 4, 4) float
-        Keyframe poses, held fixed.
-    M_map_tag : (4, 4) float
-        Starting pose.
-    cameras, T_base_cam : mapping of str
-        Camera models and extrinsics by camera name.
-    sigma_px : float
-        Corner noise, pixels per axis.
-    max_iterations : int
+    obs: Observations
+    idx: IntArray
+    M_map_base: FloatArray
+    cameras: Mapping[str, CameraModel]
+    T_base_cam: Mapping[str, SE3]
+    sigma_px: float
+
+    def linearize(self, M_map_tag: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Whitened corner residuals and Jacobians at the tag pose ``M_map_tag`` (``(4, 4)``)."""
+        tags = np.broadcast_to(M_map_tag, (len(self.idx), 4, 4))
+        r, J, _ = linearize_corners(self.obs, self.idx, self.M_map_base, tags, self.cameras,
+                                    self.T_base_cam, self.sigma_px)  # fmt: skip
+        return r, J
+
+
+def fit_tag_pose(
+    views: HeldViews, M_map_tag: FloatArray, max_iterations: int = 20
+) -> tuple[FloatArray, float]:
+    """Fit ``T_map_tag`` of one tag to the corners of its ``views``, from the starting pose
+    ``M_map_tag`` (``(4, 4)``) (module docstring).
 
     Returns
     -------
     (M_map_tag, nll) : ((4, 4) float, float)
         The local optimum reached from the start and its robust negative log-likelihood.
     """
-
-    def linearize(M: FloatArray) -> tuple[FloatArray, FloatArray]:
-        tags = np.broadcast_to(M, (len(idx), 4, 4))
-        r, J, _ = linearize_corners(obs, idx, M_map_base, tags, cameras, T_base_cam, sigma_px)
-        return r, J
-
+    linearize = views.linearize
     M = np.array(M_map_tag, dtype=np.float64)
     r, J = linearize(M)
     cost, lam = _nll(r), 1e-3
