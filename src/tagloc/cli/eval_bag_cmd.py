@@ -16,16 +16,11 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from tagloc.cli.bag_camera import (
-    CameraInfoTopicOpt,
-    CameraPosesOpt,
-    CamerasOpt,
-    CornerOrderOpt,
-    DetectionsTopicOpt,
-    ImageTopicOpt,
-    OdomTopicOpt,
-    TagslamOpt,
-    TfTopicOpt,
+from tagloc.cli.bag_options import (
+    DEFAULT_BAG_INPUTS,
+    BagInputs,
+    bag_topics_to_read,
+    with_bag_inputs,
 )
 from tagloc.cli.engine_opts import JobsOpt, RayOpt
 from tagloc.cli.eval_cmd import eval_app
@@ -59,20 +54,13 @@ class _ImageTap:
 
 
 @eval_app.command("bag")
+@with_bag_inputs
 def eval_bag(
     bag: Annotated[Path, typer.Argument(help="Input bag / MCAP.")],
     tags: Annotated[Path, typer.Option(help="Surveyed tag map.")],
     out: Annotated[Path, typer.Option(help="Output directory.")] = Path("out/eval_bag"),
     config: Annotated[Path | None, typer.Option(help="localizer.yaml.")] = None,
-    cameras: CamerasOpt = None,
-    camera_poses: CameraPosesOpt = None,
-    tagslam: TagslamOpt = None,
-    corner_order: CornerOrderOpt = "tl_tr_br_bl",
-    odom_topic: OdomTopicOpt = "/odom",
-    detections_topic: DetectionsTopicOpt = "/tag_detections",
-    image_topic: ImageTopicOpt = "/camera/image",
-    camera_info_topic: CameraInfoTopicOpt = "/camera/camera_info",
-    tf_topic: TfTopicOpt = "/tf",
+    bag_inputs: BagInputs = DEFAULT_BAG_INPUTS,  # the bag's camera and topic options
     checkpoints: Annotated[
         Path | None, typer.Option(help="checkpoints.yaml (name, x, y, radius); default: stops.")
     ] = None,
@@ -96,7 +84,7 @@ def eval_bag(
     repeatability, fix acceptance by conditions, the camera's extrinsics."""
     from rich.progress import Progress
 
-    from tagloc.cli.bag_camera import BagCamera, bag_camera, check_bag_camera
+    from tagloc.cli.bag_camera import bag_camera, check_bag_camera
     from tagloc.cli.engine_opts import make_engine
     from tagloc.config import read_text_file
     from tagloc.eval.onsite import held_out_tags
@@ -104,17 +92,15 @@ def eval_bag(
     from tagloc.eval.onsite_conditions import acceptance_by_conditions
     from tagloc.eval.onsite_report import ONSITE_FILES, onsite_summary, write_onsite_report
     from tagloc.fileutil import check_outputs
-    from tagloc.io import BagSource
     from tagloc.io.bag_stream import BagStream
     from tagloc.localize import LocalizeError, driver, load_localizer_config
     from tagloc.localize.config import LocalizerConfig
     from tagloc.localize.extrinsic_check import check_run_extrinsics
     from tagloc.localize.node import LocalizerNode
     from tagloc.localize.outputs import RunRecorder
-    from tagloc.messages import NodeTopics
     from tagloc.tags import load_tag_map, make_detector
 
-    cam = BagCamera(cameras, camera_poses, tagslam, corner_order)
+    cam = bag_inputs.camera
     check_outputs(
         {"--out": out}, directories={"--out": ONSITE_FILES},
         inputs={"BAG": bag, "--tags": tags, "--config": config, "--checkpoints": checkpoints,
@@ -129,32 +115,18 @@ def eval_bag(
     unknown = [i for i in hold_out if tag_map.get(i, family) is None]
     if unknown:
         raise LocalizeError(f"--hold-out {unknown[0]}: no tag {family}:{unknown[0]} in {tags}")
-    topics = NodeTopics(odom_topic, detections_topic, image_topic, camera_info_topic,
-                        "/ground_truth", tf_topic)  # fmt: skip
+    topics = bag_inputs.topics()
     camera, T_base_cam = bag_camera(cam)
-    probe = BagSource(bag, corner_order=corner_order, default_family=family)
-    present = probe.bag_topics
-    if odom_topic not in present and tf_topic not in present:
-        topics_text = ", ".join(sorted(present)) or "none"
-        raise LocalizeError(f"{bag}: no odometry: neither {odom_topic!r} nor {tf_topic!r} is in "
-                            f"the bag (topics: {topics_text})")  # fmt: skip
-    if detections_topic not in present and image_topic not in present:
-        raise LocalizeError(f"{bag}: no camera frames: neither {detections_topic!r} nor "
-                            f"{image_topic!r} is in the bag")  # fmt: skip
+    wanted = bag_topics_to_read(bag, topics, cam.corner_order, family, truth=False)
     camera_check = None
     if camera is not None:
-        camera_check = check_bag_camera(bag, camera, T_base_cam, tag_map, topics, corner_order,
-                                        family)  # fmt: skip
-    wanted = [t for t in (odom_topic, detections_topic, image_topic, camera_info_topic, tf_topic)
-              if t in present]  # fmt: skip
-    wanted += [t for t in present if t.rstrip("/").endswith("tf_static")]
-    wanted = sorted(set(wanted))
-
-    stream = BagStream(bag, tuple(wanted), corner_order, family)
+        camera_check = check_bag_camera(bag, camera, T_base_cam, tag_map, topics,
+                                        cam.corner_order, family)  # fmt: skip
+    stream = BagStream(bag, tuple(wanted), cam.corner_order, family)
 
     engine = None if no_hold_out else make_engine(jobs, ray)  # a bad --ray before any work
-    has_images = image_topic in present
-    tap = _ImageTap(image_topic, make_detector(cfg.tags.backend, family) if has_images else None)
+    has_images = topics.image in wanted
+    tap = _ImageTap(topics.image, make_detector(cfg.tags.backend, family) if has_images else None)
     recorder = RunRecorder(bag.name)
     node = partial(LocalizerNode, tag_map, cfg, camera=camera, T_base_cam=T_base_cam,
                    topics=topics)  # fmt: skip

@@ -12,50 +12,23 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import Annotated
 
 import typer
 
-from tagloc.cli.bag_camera import (
-    CameraInfoTopicOpt,
-    CameraPosesOpt,
-    CamerasOpt,
-    CornerOrderOpt,
-    DetectionsTopicOpt,
-    ImageTopicOpt,
-    OdomTopicOpt,
-    TagslamOpt,
-    TfTopicOpt,
+from tagloc.cli.bag_options import (
+    DEFAULT_BAG_INPUTS,
+    BagInputs,
+    bag_topics_to_read,
+    with_bag_inputs,
 )
 from tagloc.cli.engine_opts import JobsOpt, RayOpt
 from tagloc.cli.eval_cmd import eval_app
 from tagloc.cli.options import in_range
 
-if TYPE_CHECKING:
-    from tagloc.localize.node import NodeTopics
-
-
-def bag_topics_to_read(bag: Path, topics: NodeTopics, corner_order: str, family: str) -> list[str]:
-    """The node's topics present in ``bag`` (with every ``tf_static``); one line if it has no
-    odometry or no camera frames."""
-    from tagloc.io import BagSource
-    from tagloc.localize import LocalizeError
-
-    present = BagSource(bag, corner_order=corner_order, default_family=family).bag_topics
-    names = ", ".join(sorted(present)) or "none"
-    if topics.odom not in present and topics.tf not in present:
-        raise LocalizeError(f"{bag}: no odometry: neither {topics.odom!r} nor {topics.tf!r} is in "
-                            f"the bag (topics: {names})")  # fmt: skip
-    if topics.detections not in present and topics.image not in present:
-        raise LocalizeError(f"{bag}: no camera frames: neither {topics.detections!r} nor "
-                            f"{topics.image!r} is in the bag (topics: {names})")  # fmt: skip
-    wanted = [t for t in (topics.odom, topics.detections, topics.image, topics.camera_info,
-                          topics.tf, topics.truth) if t in present]  # fmt: skip
-    wanted += [t for t in present if t.rstrip("/").endswith("tf_static")]
-    return sorted(set(wanted))
-
 
 @eval_app.command("bags")
+@with_bag_inputs
 def eval_bags(
     logs: Annotated[list[Path], typer.Argument(help="Recorded drives (bags / MCAP).")],
     out: Annotated[Path, typer.Option(help="Output directory.")] = Path("out/eval_bags"),
@@ -63,15 +36,7 @@ def eval_bags(
         Path | None, typer.Option(help="Tag map of every log (default: tags.yaml beside each).")
     ] = None,
     config: Annotated[Path | None, typer.Option(help="localizer.yaml.")] = None,
-    cameras: CamerasOpt = None,
-    camera_poses: CameraPosesOpt = None,
-    tagslam: TagslamOpt = None,
-    corner_order: CornerOrderOpt = "tl_tr_br_bl",
-    odom_topic: OdomTopicOpt = "/odom",
-    detections_topic: DetectionsTopicOpt = "/tag_detections",
-    image_topic: ImageTopicOpt = "/camera/image",
-    camera_info_topic: CameraInfoTopicOpt = "/camera/camera_info",
-    tf_topic: TfTopicOpt = "/tf",
+    bag_inputs: BagInputs = DEFAULT_BAG_INPUTS,  # the bag's camera and topic options
     truth_topic: Annotated[str, typer.Option(help="Ground truth, when a log has it.")] = (
         "/ground_truth"
     ),
@@ -89,7 +54,7 @@ def eval_bags(
     by reason, ladder time, suspect tags and held-out-tag errors."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
 
-    from tagloc.cli.bag_camera import BagCamera, bag_camera
+    from tagloc.cli.bag_camera import bag_camera
     from tagloc.cli.engine_opts import engine_facts, make_engine
     from tagloc.eval.fleet import LogSpec, evaluate_logs
     from tagloc.eval.fleet_report import (
@@ -103,11 +68,10 @@ def eval_bags(
     from tagloc.io.bag_stream import BagStream
     from tagloc.localize import LocalizeError, load_localizer_config
     from tagloc.localize.config import LocalizerConfig
-    from tagloc.localize.node import NodeTopics
     from tagloc.tags import load_tag_map
 
     # 1. every input and output checked before any work
-    cam = BagCamera(cameras, camera_poses, tagslam, corner_order)
+    cam = bag_inputs.camera
     maps = {log: tags if tags is not None else log.parent / "tags.yaml" for log in logs}
     check_outputs(
         {"--out": out}, directories={"--out": FLEET_FILES},
@@ -118,8 +82,7 @@ def eval_bags(
     cfg = load_localizer_config(config) if config is not None else LocalizerConfig()
     family = cfg.tags.family
     camera, T_base_cam = bag_camera(cam)
-    topics = NodeTopics(odom_topic, detections_topic, image_topic, camera_info_topic, truth_topic,
-                        tf_topic)  # fmt: skip
+    topics = bag_inputs.topics(truth_topic)
     loaded = {m: load_tag_map(m) for m in set(maps.values())}
     names = [log.name for log in logs]
     common = os.path.commonpath([log.resolve().parent for log in logs])  # for names seen twice
@@ -130,10 +93,10 @@ def eval_bags(
         if unknown:
             raise LocalizeError(f"--hold-out {unknown[0]}: no tag {family}:{unknown[0]} in "
                                 f"{maps[log]}")  # fmt: skip
-        wanted = bag_topics_to_read(log, topics, corner_order, family)
+        wanted = bag_topics_to_read(log, topics, cam.corner_order, family)
         label = name if names.count(name) == 1 else os.path.relpath(log.resolve(), common)
         specs.append(LogSpec(
-            label, BagStream(log, tuple(wanted), corner_order, family), tag_map, cfg, topics,
+            label, BagStream(log, tuple(wanted), cam.corner_order, family), tag_map, cfg, topics,
             camera, T_base_cam, tuple(hold_out), family, max_range, EvalConfig(),
         ))  # fmt: skip
     engine = make_engine(jobs, ray)
