@@ -91,15 +91,7 @@ def test_inflation_covers_systematic_errors_that_pure_noise_models_miss() -> Non
         40,
         bias_px=0.15,
         size_error_rel=0.003,
-        noise=NoiseModel(
-            sigma_px=0.3,
-            view_angle_gain=0.0,
-            corner_bias_px=0.0,
-            scale_rel=0.0,
-            floor_translation_m=0.0,
-            floor_rotation_rad=0.0,
-            second_order=False,
-        ),
+        noise=NoiseModel.pixels_only(0.3),
     )
     assert all(BAND[0] <= m <= BAND[1] for m, _ in honest.values()), honest
     assert max(m for m, _ in bare.values()) > 3.0 * DOF, bare
@@ -129,15 +121,7 @@ def test_pose_covariance_without_inflation_is_the_gauss_newton_covariance() -> N
     J = rng.normal(size=(3, 8, 6))
     R = np.repeat(np.eye(3)[None], 3, axis=0)
     t = np.array([[0.0, 0.0, 2.0]] * 3)
-    bare = NoiseModel(
-        sigma_px=0.4,
-        view_angle_gain=0.0,
-        corner_bias_px=0.0,
-        scale_rel=0.0,
-        floor_translation_m=0.0,
-        floor_rotation_rad=0.0,
-        second_order=False,
-    )
+    bare = NoiseModel.pixels_only(0.4)
     expected = 0.16 * np.linalg.inv(np.swapaxes(J, 1, 2) @ J)
     np.testing.assert_allclose(pose_covariance(J, R, t, [50.0] * 3, bare), expected, rtol=1e-10)
     np.testing.assert_allclose(reprojection_covariance(J, 0.4), expected, rtol=1e-10)

@@ -97,6 +97,13 @@ class NoiseModel(StrictModel):
     floor_rotation_rad: float = Field(0.0005, ge=0.0, le=3.2)
     second_order: bool = True
 
+    @classmethod
+    def pixels_only(cls, sigma_px: float) -> NoiseModel:
+        """Constant pixel noise and nothing else (step 1 alone, no inflation): the plain
+        Gauss-Newton covariance ``sigma_px^2 (J^T J)^-1``."""
+        return cls(sigma_px=sigma_px, view_angle_gain=0.0, corner_bias_px=0.0, scale_rel=0.0,
+                   floor_translation_m=0.0, floor_rotation_rad=0.0, second_order=False)  # fmt: skip
+
     @field_validator("sigma_px")
     @classmethod
     def _sigma_floor(cls, sigma_px: float) -> float:
