@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 import pytest
 import yaml
+from camera_cases import DUPONT
 
 from tagloc.camera import (
     CameraModel,
@@ -26,10 +27,7 @@ from tagloc.errors import CameraModelError, TaglocError
 
 pytestmark = pytest.mark.filterwarnings("error")
 
-FISHEYE = PinholeEquidistant(
-    width=1280, height=1024, fx=603.924, fy=603.166, cx=665.041, cy=554.34,
-    k1=-0.0122741, k2=-0.0100319, k3=0.00752173, k4=-0.00247881,
-)  # fmt: skip
+FISHEYE = DUPONT
 RADTAN = PinholeRadtan(
     width=640, height=480, fx=520.0, fy=521.5, cx=318.2, cy=242.9,
     k1=-0.3, k2=0.11, p1=0.0012, p2=-0.0008, k3=-0.02,

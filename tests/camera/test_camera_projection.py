@@ -17,17 +17,13 @@ import math
 import cv2
 import numpy as np
 import pytest
+from camera_cases import DUPONT
 
 from tagloc.camera import CameraModel, PinholeEquidistant, PinholeRadtan
 from tagloc.errors import CameraModelError
 
 pytestmark = pytest.mark.filterwarnings("error")
 
-# The left camera of the dupont data set (Kalibr, 1280x1024): image corners reach 87.6 degrees.
-DUPONT = PinholeEquidistant(
-    width=1280, height=1024, fx=603.924, fy=603.166, cx=665.041, cy=554.34,
-    k1=-0.0122741, k2=-0.0100319, k3=0.00752173, k4=-0.00247881,
-)  # fmt: skip
 # A T265-like fisheye whose image corners see beyond 90 degrees (outside the z > 0 domain).
 WIDE = PinholeEquidistant(
     width=848, height=800, fx=285.7, fy=285.9, cx=418.9, cy=394.7,

@@ -152,6 +152,19 @@ def test_log_time_can_differ_from_the_stamp(tmp_path: Path) -> None:
     assert [m.stamp_ns for _, m in BagSource(tmp_path / "a.mcap", stamp="log")] == [9 * S, 10 * S]
 
 
+def _copy(reader: Any, writer: Any, digest: str) -> None:
+    """Every connection and message of a rosbags reader into a writer (its own compression);
+    ``digest``: the writer's name for the message definition's hash."""
+    with reader, writer:
+        conns = {
+            c.id: writer.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data,
+                                        **{digest: c.digest})
+            for c in reader.connections
+        }  # fmt: skip
+        for conn, stamp, raw in reader.messages():
+            writer.write(conns[conn.id], stamp, raw)
+
+
 @pytest.mark.parametrize("compression", ["bz2", "lz4"])
 def test_ros1_compressed_chunks_are_read(tmp_path: Path, compression: str) -> None:
     from rosbags.rosbag1 import Reader, Writer
@@ -160,13 +173,7 @@ def test_ros1_compressed_chunks_are_read(tmp_path: Path, compression: str) -> No
     write(tmp_path / "plain.bag", records, "ros1")
     out = Writer(tmp_path / "packed.bag")
     out.set_compression(Writer.CompressionFormat[compression.upper()])
-    with Reader(tmp_path / "plain.bag") as reader, out:
-        conns = {
-            c.id: out.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, md5sum=c.digest)
-            for c in reader.connections
-        }
-        for conn, stamp, raw in reader.messages():
-            out.write(conns[conn.id], stamp, raw)
+    _copy(Reader(tmp_path / "plain.bag"), out, "md5sum")
     back = list(BagSource(tmp_path / "packed.bag"))
     assert len(back) == len(records)
     for (_, a), (_, b) in zip(records, back, strict=True):
@@ -180,13 +187,7 @@ def test_ros2_zstd_compressed_bag_is_read(tmp_path: Path) -> None:
     write(tmp_path / "plain", records, "ros2")
     out = Writer(tmp_path / "packed", version=Writer.VERSION_LATEST)
     out.set_compression(CompressionMode.MESSAGE, CompressionFormat.ZSTD)
-    with Reader(tmp_path / "plain") as reader, out:
-        conns = {
-            c.id: out.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, rihs01=c.digest)
-            for c in reader.connections
-        }
-        for conn, stamp, raw in reader.messages():
-            out.write(conns[conn.id], stamp, raw)
+    _copy(Reader(tmp_path / "plain"), out, "rihs01")
     back = list(BagSource(tmp_path / "packed"))
     for (_, a), (_, b) in zip(records, back, strict=True):
         assert_same(a, b, ros1=False)
