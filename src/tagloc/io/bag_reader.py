@@ -32,39 +32,34 @@ Damaged files
     file first (``rosbag reindex``, ``mcap recover``).
 Compressed files
     ``*.bag.bz2`` / ``*.mcap.bz2`` (a whole file compressed, as the dupont data set ships) are
-    decompressed once into a cache (``<tmp>/tagloc-bags-<uid>/``, keyed by path, size and mtime;
-    the source is never touched). Compressed chunks inside a ROS 1 bag (bz2, lz4) and zstd ROS 2
-    bags are read directly.
+    decompressed once (:func:`~tagloc.io.bag_open.open_bag`) into a cache
+    (``<tmp>/tagloc-bags-<uid>/``, keyed by path, size and mtime; the source is never touched).
+    Compressed chunks inside a ROS 1 bag (bz2, lz4) and zstd ROS 2 bags are read directly.
 """
 
 from __future__ import annotations
 
-import bz2
 import contextlib
-import hashlib
 import logging
 import os
-import tempfile
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Literal, NamedTuple
 
 from tagloc.config import validate
-from tagloc.fileutil import atomic_path
+from tagloc.io.bag_open import BAG_KINDS, open_bag
 from tagloc.io.convert import DECODERS, decode, make_typestore
 from tagloc.io.decoded import Bad, DecodeOptions
-from tagloc.io.errors import BagFormatError, BagTopicError, InputNotFoundError, RecordError
+from tagloc.io.errors import BagFormatError, BagTopicError, RecordError
 from tagloc.messages import Message, TransformMsg
 from tagloc.tags.detection import TAGLOC_ORDER, corner_permutation
 from tagloc.tags.families import family_spec
 
+__all__ = ["BagSource", "BagTopic", "open_bag"]
+
 logger = logging.getLogger(__name__)
 
 OnBad = Literal["skip", "error"]
-#: A ``.bz2`` bag may decompress to at most this many times its size (or 64 MiB), so a small
-#: crafted file cannot fill the disk; real bags compress by far less.
-MAX_BZ2_RATIO = 200
-_KINDS = {".bag": "a ROS 1 bag", ".mcap": "an MCAP file", ".db3": "a ROS 2 sqlite3 file"}
 
 
 class BagTopic(NamedTuple):
@@ -79,78 +74,6 @@ class _Selected(NamedTuple):
     name: str  # stream topic
     record: type[Message]
     static: bool
-
-
-def open_bag(path: str | os.PathLike[str], cache_dir: str | os.PathLike[str] | None = None) -> Path:
-    """The path ``AnyReader`` should open for ``path``, decompressing a ``*.bz2`` file once.
-
-    Parameters
-    ----------
-    path : str or PathLike
-        A ROS 1 ``.bag``, an ``.mcap`` or ``.db3`` file, a ROS 2 bag directory (with
-        ``metadata.yaml``), or one of those files compressed whole as ``*.bag.bz2``/``*.mcap.bz2``.
-    cache_dir : str or PathLike, optional
-        Where decompressed copies live; default ``<tempfile.gettempdir()>/tagloc-bags-<uid>``.
-
-    Returns
-    -------
-    Path
-        ``path`` itself, or the cached decompressed copy (written atomically, reused while the
-        source keeps its size and modification time).
-
-    Raises
-    ------
-    InputNotFoundError
-        If ``path`` does not exist.
-    BagFormatError
-        For an unknown extension, a directory without ``metadata.yaml``, or a corrupt ``.bz2``.
-    """
-    path = Path(path)
-    if not path.exists():
-        raise InputNotFoundError(f"{path}: no such bag, MCAP file or ROS 2 bag directory")
-    if path.is_dir():
-        if not (path / "metadata.yaml").is_file():
-            raise BagFormatError(f"{path}: a directory without metadata.yaml is not a ROS 2 bag")
-        return path
-    if path.suffix == ".bz2":
-        return _decompressed(path, cache_dir)
-    if path.suffix not in _KINDS:
-        raise BagFormatError(
-            f"{path}: unknown bag extension {path.suffix!r} (expected .bag, .mcap, .db3, a "
-            "ROS 2 bag directory, or .bag.bz2/.mcap.bz2)"
-        )
-    return path
-
-
-def _decompressed(path: Path, cache_dir: str | os.PathLike[str] | None) -> Path:
-    inner = Path(path.stem)
-    if inner.suffix not in (".bag", ".mcap"):
-        raise BagFormatError(f"{path}: expected a compressed .bag or .mcap (name.bag.bz2)")
-    stat = path.stat()
-    key = f"{path.resolve()}|{stat.st_size}|{stat.st_mtime_ns}"
-    user = os.getuid() if hasattr(os, "getuid") else 0  # per user: /tmp is shared
-    root = Path(cache_dir) if cache_dir else Path(tempfile.gettempdir()) / f"tagloc-bags-{user}"
-    target = root / hashlib.sha256(key.encode()).hexdigest()[:16] / inner.name
-    if target.is_file():
-        return target
-    logger.info("decompressing %s to %s", path, target)
-    limit = max(MAX_BZ2_RATIO * stat.st_size, 64 * 2**20)
-    try:
-        with atomic_path(target) as tmp, bz2.open(path, "rb") as src, tmp.open("wb") as dst:
-            written = 0
-            while chunk := src.read(1 << 20):
-                written += len(chunk)
-                if written > limit:
-                    raise BagFormatError(
-                        f"{path}: decompresses to more than {limit} bytes ({MAX_BZ2_RATIO} times "
-                        "its size); refusing it as a decompression bomb"
-                    )
-                dst.write(chunk)
-    except BagFormatError:
-        raise
-    except (OSError, EOFError, ValueError) as exc:
-        raise BagFormatError(f"{path}: cannot decompress it to {target} ({exc})") from exc
-    return target
 
 
 class BagSource:
@@ -257,7 +180,7 @@ class BagSource:
 
     # ----- internals ------------------------------------------------------------------------------
     def _describe(self) -> str:
-        kind = "a ROS 2 bag" if self._file.is_dir() else _KINDS.get(self._file.suffix, "a bag")
+        kind = "a ROS 2 bag" if self._file.is_dir() else BAG_KINDS.get(self._file.suffix, "a bag")
         return f"{self.path}: cannot open as {kind}"
 
     def _reader(self) -> Any:
