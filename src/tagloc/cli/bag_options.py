@@ -19,18 +19,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from tagloc.cli.bag_camera import (
-    BagCamera,
-    CameraInfoTopicOpt,
-    CameraPosesOpt,
-    CamerasOpt,
-    CornerOrderOpt,
-    DetectionsTopicOpt,
-    ImageTopicOpt,
-    OdomTopicOpt,
-    TagslamOpt,
-    TfTopicOpt,
-)
+from tagloc.cli import bag_camera as opts
+from tagloc.cli.bag_camera import BagCamera
 
 if TYPE_CHECKING:
     from tagloc.messages import NodeTopics
@@ -39,17 +29,17 @@ __all__ = ["DEFAULT_BAG_INPUTS", "BagInputs", "bag_topics_to_read", "with_bag_in
 
 #: The options in their command-line order: (parameter name, annotated type, default).
 _CAMERA_OPTIONS: tuple[tuple[str, Any, Any], ...] = (
-    ("cameras", CamerasOpt, None),
-    ("camera_poses", CameraPosesOpt, None),
-    ("tagslam", TagslamOpt, None),
-    ("corner_order", CornerOrderOpt, "tl_tr_br_bl"),
+    ("cameras", opts.CamerasOpt, None),
+    ("camera_poses", opts.CameraPosesOpt, None),
+    ("tagslam", opts.TagslamOpt, None),
+    ("corner_order", opts.CornerOrderOpt, "tl_tr_br_bl"),
 )
 _TOPIC_OPTIONS: tuple[tuple[str, Any, Any], ...] = (
-    ("odom_topic", OdomTopicOpt, "/odom"),
-    ("detections_topic", DetectionsTopicOpt, "/tag_detections"),
-    ("image_topic", ImageTopicOpt, "/camera/image"),
-    ("camera_info_topic", CameraInfoTopicOpt, "/camera/camera_info"),
-    ("tf_topic", TfTopicOpt, "/tf"),
+    ("odom_topic", opts.OdomTopicOpt, "/odom"),
+    ("detections_topic", opts.DetectionsTopicOpt, "/tag_detections"),
+    ("image_topic", opts.ImageTopicOpt, "/camera/image"),
+    ("camera_info_topic", opts.CameraInfoTopicOpt, "/camera/camera_info"),
+    ("tf_topic", opts.TfTopicOpt, "/tf"),
 )
 
 

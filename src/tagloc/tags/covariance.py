@@ -244,15 +244,10 @@ def pose_covariance(
 
 
 def linearized_pose_covariance(
-    lin: Linearization,
-    R_cam_obj: npt.ArrayLike,
-    t_cam_obj: npt.ArrayLike,
-    extent_px: npt.ArrayLike,
-    noise: NoiseModel,
-    view_angle_rad: npt.ArrayLike | None = None,
-    delta_other: npt.ArrayLike | None = None,
-    barrier_px2: npt.ArrayLike | None = None,
-) -> FloatArray:
+    lin: Linearization, R_cam_obj: npt.ArrayLike, t_cam_obj: npt.ArrayLike,
+    extent_px: npt.ArrayLike, noise: NoiseModel, view_angle_rad: npt.ArrayLike | None = None,
+    delta_other: npt.ArrayLike | None = None, barrier_px2: npt.ArrayLike | None = None,
+) -> FloatArray:  # fmt: skip
     """:func:`pose_covariance` from the Jacobians' :class:`Linearization` (the same numbers).
 
     Parameters are those of :func:`pose_covariance`; the valley term needs ``lin.curvature``.
