@@ -15,17 +15,8 @@ import numpy as np
 import pytest
 from geometry_helpers import SEED, rotvec_with_angle
 
-from tagloc.geometry import (
-    SE2,
-    SE3,
-    SO3,
-    se2_right_jacobian,
-    se2_right_jacobian_inv,
-    se3_right_jacobian,
-    se3_right_jacobian_inv,
-    so3_right_jacobian,
-    so3_right_jacobian_inv,
-)
+from tagloc.geometry import SE2, SE3, SO3
+from tagloc.geometry import jacobians as jac
 from tagloc.geometry._lie import LieGroup
 
 EPS = 1e-6
@@ -83,9 +74,9 @@ def _elements(cls: type[LieGroup], rng: np.random.Generator) -> list[tuple[str, 
 
 
 RIGHT_JACOBIANS = {
-    SO3: (so3_right_jacobian, so3_right_jacobian_inv),
-    SE3: (se3_right_jacobian, se3_right_jacobian_inv),
-    SE2: (se2_right_jacobian, se2_right_jacobian_inv),
+    SO3: (jac.so3_right_jacobian, jac.so3_right_jacobian_inv),
+    SE3: (jac.se3_right_jacobian, jac.se3_right_jacobian_inv),
+    SE2: (jac.se2_right_jacobian, jac.se2_right_jacobian_inv),
 }
 
 
