@@ -28,7 +28,7 @@ from tagloc.camera import CameraModel, from_camera_info
 from tagloc.errors import TransformLookupError
 from tagloc.geometry import SE3
 from tagloc.localize.config import LocalizerConfig
-from tagloc.localize.fiducial import E_Z, FiducialConfig, FiducialFixSource, FrameFixes
+from tagloc.localize.fiducial import E_Z, FiducialFixSource, FrameFixes
 from tagloc.localize.run import CameraFrameRecord, FixAttempt
 from tagloc.localize.sources import (
     Arrival,
@@ -245,16 +245,9 @@ class TagSource:
                     self.skipped.skip("no_extrinsics", str(exc))
                 return None
         tags = cfg.tags
-        fid = FiducialConfig(
-            cov_scale=tags.cov_scale, min_cov_translation_m=tags.min_cov_translation_m,
-            min_cov_rotation_rad=tags.min_cov_rotation_rad, mode=tags.mode,
-            prior_rotation_sigma_rad=tags.prior_rotation_sigma_rad,
-            ambiguity_log_odds_with_prior=tags.ambiguity_log_odds_with_prior,
-            shared_quad_px=tags.shared_quad_px,
-        )  # fmt: skip
         self._source = FiducialFixSource(
             self._camera, T_base_cam, self._inputs.tag_map, family=tags.family,
-            gates=cfg.gates.observation_gates(), noise=tags.noise, config=fid,
+            gates=cfg.gates.observation_gates(), noise=tags.noise, config=tags,
             map_frame=cfg.frames.map_frame,
             up_base=E_Z if cfg.odometry_frame.knows_up else None,
         )  # fmt: skip
