@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import logging
 from collections import Counter
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Literal
@@ -90,7 +90,9 @@ def localize(
     truth_topic: Annotated[str, typer.Option(help="Ground truth.")] = "/ground_truth",
     seed: Annotated[int, typer.Option(help="Scenario seed.", callback=seed_range)] = 0,
     duration: Annotated[
-        float | None, typer.Option(help="Scenario: first N s only.", callback=duration_range)
+        float | None,
+        typer.Option(help="First N s only (of the scenario, or of the bag).",
+                     callback=duration_range),
     ] = None,
     tf_topic: TfTopicOpt = "/tf",
     lidar_topic: Annotated[str, typer.Option(help="Lidar sweeps (PointCloud2).")] = "/lidar/points",
@@ -143,7 +145,7 @@ def localize(
         wired = _scenario_node(scenario, seed, duration, cfg, points, live=realtime)
     else:
         assert bag is not None
-        wired = _bag_node(bag, tags, cfg, cam, topics, points, live=realtime)
+        wired = _bag_node(bag, tags, cfg, cam, topics, points, live=realtime, duration=duration)
     from tagloc.cli.live import attach_live
 
     wired, live = attach_live(wired, view=view, view_save=view_save)
@@ -217,6 +219,22 @@ def localize_wired(
         lines.append(f"WARNING: {check.warning}")
     atomic_write_text(out / "localizer.yaml", node.config.to_yaml_text())
     return [*written, out / "localizer.yaml"], lines
+
+
+class _FirstSeconds:
+    """The messages of a stream stamped within its first ``seconds`` (``--duration``)."""
+
+    def __init__(self, stream: Iterable[tuple[str, Message]], seconds: float) -> None:
+        self.stream, self.span_ns = stream, round(seconds * 1e9)
+
+    def __iter__(self) -> Iterator[tuple[str, Message]]:
+        t0 = None
+        for topic, msg in self.stream:
+            if t0 is None and msg.stamp_ns > 0:  # a static transform may be stamped 0
+                t0 = msg.stamp_ns
+            if t0 is not None and msg.stamp_ns - t0 > self.span_ns:
+                return
+            yield topic, msg
 
 
 class _OneCamera:
@@ -295,6 +313,7 @@ def _scenario_node(
 def _bag_node(
     bag: Path, tags: Path | None, cfg: LocalizerConfig | None, cam: BagCamera,
     topics: tuple[str, ...], premap: np.ndarray | None = None, *, live: bool = False,
+    duration: float | None = None,
 ) -> WiredNode:  # fmt: skip
     from tagloc.cli.bag_camera import bag_camera, bag_cameras
     from tagloc.io import BagSource
@@ -339,7 +358,8 @@ def _bag_node(
     node = partial(LocalizerNode, tag_map, config, camera=camera, T_base_cam=T_base_cam,
                    topics=roles, premap=premap, cameras=rig)  # fmt: skip
     skipped = {"lidar_not_point_cloud": not_clouds} if not_clouds else {}
-    return WiredNode(config, node, source, bag.name, checked, tag_map, premap, skipped,
+    stream = source if duration is None else _FirstSeconds(source, duration)
+    return WiredNode(config, node, stream, bag.name, checked, tag_map, premap, skipped,
                      tuple(c.name for c in rig))  # fmt: skip
 
 
