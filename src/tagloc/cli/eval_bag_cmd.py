@@ -91,6 +91,7 @@ def eval_bag(
     from tagloc.eval.onsite_checkpoints import checkpoint_spreads, detect_stops, parse_checkpoints
     from tagloc.eval.onsite_conditions import acceptance_by_conditions
     from tagloc.eval.onsite_report import ONSITE_FILES, onsite_summary, write_onsite_report
+    from tagloc.eval.refusals import fix_decisions
     from tagloc.fileutil import check_outputs
     from tagloc.io.bag_stream import BagStream
     from tagloc.localize import LocalizeError, driver, load_localizer_config
@@ -150,10 +151,12 @@ def eval_bag(
                 )  # fmt: skip
         finally:
             engine.close()
+    decisions = fix_decisions(run.fixes)
     facts = {
         "odometry_samples": len(run.stamps_ns), "camera_frames": len(run.frames),
         "fixes_accepted": sum(f.accepted for f in run.fixes), "fix_attempts": len(run.fixes),
         "images_measured": tap.images,
+        "fix_decisions": decisions.to_dict(),
     }  # fmt: skip
     summary = onsite_summary(
         bag.name, held, stops, spreads, acceptance,
@@ -164,6 +167,6 @@ def eval_bag(
     write_onsite_report(summary, held, stops, out, run)
     from tagloc.eval.onsite_report import summary_lines
 
-    for line in summary_lines(summary):
+    for line in [*summary_lines(summary), *decisions.lines()]:
         typer.echo(line)
     typer.echo(f"wrote {', '.join(ONSITE_FILES)} to {out}")

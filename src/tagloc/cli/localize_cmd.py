@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import logging
 from collections import Counter
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Literal
@@ -37,11 +37,13 @@ from tagloc.fileutil import check_outputs
 if TYPE_CHECKING:
     import numpy as np
 
+    from tagloc.camera import CameraModel
     from tagloc.cli.bag_camera import BagCamera
+    from tagloc.geometry import SE3
     from tagloc.io import BagTopic
     from tagloc.localize.config import LocalizerConfig
-    from tagloc.localize.node import LocalizerNode
-    from tagloc.localize.outputs import OutputSink
+    from tagloc.localize.node import LocalizerNode, NodeCamera, NodeTopics
+    from tagloc.localize.outputs import NodeOutput, OutputSink
     from tagloc.messages import Message
     from tagloc.tags import TagMap
 
@@ -88,7 +90,9 @@ def localize(
     truth_topic: Annotated[str, typer.Option(help="Ground truth.")] = "/ground_truth",
     seed: Annotated[int, typer.Option(help="Scenario seed.", callback=seed_range)] = 0,
     duration: Annotated[
-        float | None, typer.Option(help="Scenario: first N s only.", callback=duration_range)
+        float | None,
+        typer.Option(help="First N s only (of the scenario, or of the bag).",
+                     callback=duration_range),
     ] = None,
     tf_topic: TfTopicOpt = "/tf",
     lidar_topic: Annotated[str, typer.Option(help="Lidar sweeps (PointCloud2).")] = "/lidar/points",
@@ -141,7 +145,7 @@ def localize(
         wired = _scenario_node(scenario, seed, duration, cfg, points, live=realtime)
     else:
         assert bag is not None
-        wired = _bag_node(bag, tags, cfg, cam, topics, points, live=realtime)
+        wired = _bag_node(bag, tags, cfg, cam, topics, points, live=realtime, duration=duration)
     from tagloc.cli.live import attach_live
 
     wired, live = attach_live(wired, view=view, view_save=view_save)
@@ -184,19 +188,20 @@ def localize_wired(
 
     sink = RunFilesSink(out, wired.config.frames.map_frame, bag=bag, name=wired.name)
     extrinsics = ExtrinsicRecorder()
+    judged = _OneCamera(extrinsics, wired.cameras[0] if wired.cameras else "")
     extra: dict[str, object] = {}
     if wired.camera_check is not None:
         extra["camera_check"] = wired.camera_check
     try:
         if realtime is not None:
-            result = run(wired.node, wired.stream, [sink, extrinsics, *sinks], clock="wall",
+            result = run(wired.node, wired.stream, [sink, judged, *sinks], clock="wall",
                          speed=realtime)  # fmt: skip
             assert result.realtime is not None
             extra["realtime"] = result.realtime.to_dict()
             for line in result.realtime.lines():
                 logger.info("%s", line)
         else:
-            result = run(wired.node, wired.stream, [sink, extrinsics, *sinks])
+            result = run(wired.node, wired.stream, [sink, judged, *sinks])
         node = result.node
         _check_frames(node, sink.counts["frames"])
         check = extrinsics.check(node.T_base_cam)
@@ -214,6 +219,36 @@ def localize_wired(
         lines.append(f"WARNING: {check.warning}")
     atomic_write_text(out / "localizer.yaml", node.config.to_yaml_text())
     return [*written, out / "localizer.yaml"], lines
+
+
+class _FirstSeconds:
+    """The messages of a stream stamped within its first ``seconds`` (``--duration``)."""
+
+    def __init__(self, stream: Iterable[tuple[str, Message]], seconds: float) -> None:
+        self.stream, self.span_ns = stream, round(seconds * 1e9)
+
+    def __iter__(self) -> Iterator[tuple[str, Message]]:
+        t0 = None
+        for topic, msg in self.stream:
+            if t0 is None and msg.stamp_ns > 0:  # a static transform may be stamped 0
+                t0 = msg.stamp_ns
+            if t0 is not None and msg.stamp_ns - t0 > self.span_ns:
+                return
+            yield topic, msg
+
+
+class _OneCamera:
+    """Passes on every output but the fixes of other cameras than ``camera`` (the extrinsic
+    check judges one camera's mounting, the node's first)."""
+
+    def __init__(self, sink: OutputSink, camera: str) -> None:
+        self.sink, self.camera = sink, camera
+
+    def write(self, output: NodeOutput) -> None:
+        from tagloc.localize.run import FixAttempt
+
+        if not isinstance(output, FixAttempt) or output.camera == self.camera:
+            self.sink.write(output)
 
 
 def _check_frames(node: LocalizerNode, n_frames: int) -> None:
@@ -278,8 +313,9 @@ def _scenario_node(
 def _bag_node(
     bag: Path, tags: Path | None, cfg: LocalizerConfig | None, cam: BagCamera,
     topics: tuple[str, ...], premap: np.ndarray | None = None, *, live: bool = False,
+    duration: float | None = None,
 ) -> WiredNode:  # fmt: skip
-    from tagloc.cli.bag_camera import bag_camera, check_bag_camera
+    from tagloc.cli.bag_camera import bag_camera, bag_cameras
     from tagloc.io import BagSource
     from tagloc.localize import LocalizeError
     from tagloc.localize.config import LocalizerConfig
@@ -290,26 +326,27 @@ def _bag_node(
     if tags is None:
         raise LocalizeError("a bag needs the tag map: --tags tags.yaml")
     tag_map = load_tag_map(tags)
-    camera, T_base_cam = bag_camera(cam)
     roles = NodeTopics(*topics)
     config = live_order(cfg or LocalizerConfig(), live)
     family = config.tags.family
     source = BagSource(bag, corner_order=cam.corner_order, default_family=family)
+    rig = bag_cameras(cam, source.bag_topics)  # every camera on its tag topic, or none
+    camera, T_base_cam = (None, None) if rig else bag_camera(cam)
     if roles.odom not in source.bag_topics and roles.tf not in source.bag_topics:
         raise LocalizeError(
             f"{bag}: no odometry: neither {roles.odom!r} nor {roles.tf!r} is in the bag "
             f"(topics: {', '.join(sorted(source.bag_topics)) or 'none'})"
         )
-    if roles.detections not in source.bag_topics and roles.image not in source.bag_topics:
+    present = {roles.detections, roles.image} & set(source.bag_topics)
+    if not rig and not present:
         raise LocalizeError(
             f"{bag}: no camera frames: neither {roles.detections!r} nor {roles.image!r} is in "
             f"the bag (topics: {', '.join(sorted(source.bag_topics)) or 'none'})"
         )
-    checked = None
-    if camera is not None:
-        checked = check_bag_camera(bag, camera, T_base_cam, tag_map, roles, cam.corner_order,
-                                   family)  # fmt: skip
+    checked = _check_cameras(bag, rig, camera, T_base_cam, tag_map, roles, cam.corner_order,
+                             family)  # fmt: skip
     wanted = [t for t in topics if t in source.bag_topics]
+    wanted += [c.detections_topic for c in rig]
     wanted += [t for t in source.bag_topics if t.rstrip("/").endswith("tf_static")]
     not_clouds = _lidar_not_point_clouds(bag, source.bag_topics.get(roles.lidar), roles.lidar,
                                          premap is not None)  # fmt: skip
@@ -319,9 +356,33 @@ def _bag_node(
                        default_family=family)  # fmt: skip
     _check_premap(premap, tag_map, config)
     node = partial(LocalizerNode, tag_map, config, camera=camera, T_base_cam=T_base_cam,
-                   topics=roles, premap=premap)  # fmt: skip
+                   topics=roles, premap=premap, cameras=rig)  # fmt: skip
     skipped = {"lidar_not_point_cloud": not_clouds} if not_clouds else {}
-    return WiredNode(config, node, source, bag.name, checked, tag_map, premap, skipped)
+    stream = source if duration is None else _FirstSeconds(source, duration)
+    return WiredNode(config, node, stream, bag.name, checked, tag_map, premap, skipped,
+                     tuple(c.name for c in rig))  # fmt: skip
+
+
+def _check_cameras(
+    bag: Path, rig: tuple[NodeCamera, ...], camera: CameraModel | None, T_base_cam: SE3 | None,
+    tag_map: TagMap, roles: NodeTopics, corner_order: str, family: str,
+) -> dict[str, object] | None:  # fmt: skip
+    """Each camera's model against the bag's first frames (one line naming the camera that does
+    not fit, before any fix): the one camera's result, or ``{camera: result}`` of a rig."""
+    import dataclasses
+
+    from tagloc.cli.bag_camera import check_bag_camera
+
+    if not rig:
+        return None if camera is None else check_bag_camera(
+            bag, camera, T_base_cam, tag_map, roles, corner_order, family)  # fmt: skip
+    out: dict[str, object] = {}
+    for c in rig:
+        assert c.camera is not None
+        own = dataclasses.replace(roles, detections=c.detections_topic)
+        out[c.name] = check_bag_camera(bag, c.camera, c.T_base_cam, tag_map, own, corner_order,
+                                       family, name=c.name)  # fmt: skip
+    return out
 
 
 def _lidar_not_point_clouds(bag: Path, info: BagTopic | None, topic: str, premap: bool) -> int:

@@ -139,7 +139,7 @@ def _merged(base: dict[str, object], update: dict[str, object]) -> dict[str, obj
     return out
 
 
-def _tag_topics(cameras_yaml: Path, given: list[str]) -> dict[str, str]:
+def camera_tag_topics(cameras_yaml: Path, given: list[str]) -> dict[str, str]:
     """``topic -> camera`` from ``--tag-topic CAM=TOPIC`` or the camchain's ``tagtopic`` keys."""
     from tagloc.config import parse_yaml_mapping
 
@@ -172,7 +172,7 @@ def bag_survey(
     from tagloc.mapping.stream_survey import parse_camera_poses, parse_tagslam, survey_from_tagslam
 
     cameras = load_kalibr_cameras(cameras_yaml)
-    topics = _tag_topics(cameras_yaml, tag_topics)
+    topics = camera_tag_topics(cameras_yaml, tag_topics)
     if not topics:
         raise MappingError(
             f"{cameras_yaml}: no camera has a 'tagtopic'; give --tag-topic CAM=TOPIC"

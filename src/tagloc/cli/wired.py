@@ -30,3 +30,6 @@ class WiredNode:
     premap: np.ndarray | None = None
     #: Inputs left out before the node, by reason (counted in summary.json's ``skipped``).
     skipped: dict[str, int] = field(default_factory=dict)
+    #: The rig's cameras by name (empty: one camera on the node's topics); the extrinsic check
+    #: judges the first.
+    cameras: tuple[str, ...] = ()

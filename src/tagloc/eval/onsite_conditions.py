@@ -92,8 +92,9 @@ def acceptance_by_conditions(
     fixes: Iterable[FixAttempt],
     measures: dict[tuple[int, int], ImageMeasure] | None = None,
 ) -> dict[str, Any]:
-    """Acceptance rates binned by ``distance_m``, ``view_angle_deg`` (attempts refused before
-    PnP have no angle: counted in ``view_angle_unknown``, not binned) and, with ``measures``
+    """Acceptance rates binned by ``distance_m``, ``view_angle_deg`` (attempts refused by a
+    per-observation gate, before or after PnP, have no angle: counted in
+    ``view_angle_unknown``, not binned) and, with ``measures``
     (by ``(stamp_ns, tag_id)``; a joint fix takes its first tag's), ``laplacian_var`` and
     ``brightness``. Returns ``{condition: [AcceptanceBin.to_dict(), ...], "note": ...}``."""
     attempts = [f for f in fixes if f.tag_ids]

@@ -105,7 +105,8 @@ def summary_lines(summary: dict[str, Any]) -> list[str]:
     acc = summary["acceptance"]
     lines.append(
         f"fix acceptance: {acc['accepted']} of {acc['attempts']} ({acc['note']}; "
-        f"{acc['view_angle_unknown']} refused before PnP have no viewing angle)"
+        f"{acc['view_angle_unknown']} refused by a per-observation gate, before or after PnP, "
+        "have no viewing angle)"
     )
     for key, unit in (("distance_m", "m"), ("view_angle_deg", "deg"),
                       ("laplacian_var", "lap.var"), ("brightness", "grey")):  # fmt: skip

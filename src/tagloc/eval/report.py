@@ -226,8 +226,24 @@ def _fixes_section(s: EvalSummary) -> str:
         + f"<p>{s.n_unknown_range} attempts without a range.</p>"
         + "<h3>Acceptance vs viewing angle</h3>"
         + _table(header, _bins_rows(s.acceptance_vs_angle, "deg"))
-        + f"<p>{s.n_unknown_angle} attempts without an angle (rejected before PnP).</p>"
+        + f"<p>{s.n_unknown_angle} attempts without an angle (refused by a per-observation "
+        "gate, before or after PnP: no pose is kept).</p>" + _decisions_section(s)
     )  # fmt: skip
+
+
+def _decisions_section(s: EvalSummary) -> str:
+    """The attempts by decision and reason, per camera, and the hint of a dominant refusal."""
+    d = s.fix_decisions
+    n = max(d.n_attempts, 1)
+    rows = [[k, v, v / n] for k, v in d.by_decision.items()]
+    out = "<h3>Fix attempts by decision</h3>"
+    if d.hint:
+        out += f"<p><b>{html.escape(d.hint)}</b></p>"
+    out += _table(["decision", "attempts", "share"], rows)
+    if len(d.by_camera) > 1:
+        cams = [[c.camera, c.n_attempts, c.n_accepted, c.acceptance] for c in d.by_camera]
+        out += _table(["camera", "attempts", "accepted", "acceptance"], cams)
+    return out
 
 
 def _events_section(s: EvalSummary) -> str:

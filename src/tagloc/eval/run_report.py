@@ -15,6 +15,7 @@ from collections import Counter
 
 import numpy as np
 
+from tagloc.eval.refusals import DecisionBook
 from tagloc.eval.report_style import figure, page, table, verdict
 from tagloc.eval.run_figures import decisions_png, ladder_png, trajectory_png
 from tagloc.localize.outputs import Estimate, NodeOutput
@@ -54,6 +55,7 @@ class RunReportSink:
         self.name = name
         self.paths = {k: _Thinned() for k in ("fused", "odometry", "truth")}
         self.decisions: Counter[str] = Counter()
+        self.book = DecisionBook()  # the same by camera, and the hint
         self.ladder: list[tuple[int, int]] = []  # (stamp_ns, level), first 10000 moves
         self.t0_ns: int | None = None
         self.t_end_ns = 0
@@ -80,6 +82,7 @@ class RunReportSink:
                 self._n += 1
         elif isinstance(output, FixAttempt):
             self.decisions[output.decision] += 1
+            self.book.add(output)
         elif isinstance(output, LadderTransition) and len(self.ladder) < 10_000:
             if not self.ladder:
                 self.ladder.append((output.stamp_ns, int(output.from_level)))
@@ -118,9 +121,20 @@ class RunReportSink:
                       figure(ladder_png(np.array(t), np.array(levels)), "ladder")]  # fmt: skip
         if self.decisions:
             rows = sorted(self.decisions.items(), key=lambda kv: -kv[1])
-            parts += ["<h2>Fix decisions</h2>", table(["decision", "attempts"], rows),
+            parts += ["<h2>Fix decisions</h2>", *_refusal_parts(self.book),
+                      table(["decision", "attempts"], rows),
                       figure(decisions_png(self.decisions), "decisions")]  # fmt: skip
         return page(f"tagloc localize: {self.name}", parts)
+
+
+def _refusal_parts(book: DecisionBook) -> list[str]:
+    """The hint of a dominant refusal and the acceptance per camera (several cameras)."""
+    found = book.result()
+    parts = [] if found.hint is None else [f"<p><b>{_esc(found.hint)}</b></p>"]
+    if len(found.by_camera) > 1:
+        rows = [[c.camera, c.n_attempts, c.n_accepted, c.acceptance] for c in found.by_camera]
+        parts.append(table(["camera", "attempts", "accepted", "acceptance"], rows))
+    return parts
 
 
 def _esc(text: str) -> str:

@@ -34,6 +34,7 @@ from tagloc.eval.protocol import (
     reliability_protocol,
     relocalization_times,
 )
+from tagloc.eval.refusals import FixDecisions, fix_decisions
 from tagloc.eval.supervision import (
     CorrectionBounds,
     LadderSummary,
@@ -119,10 +120,12 @@ class EvalSummary:
     estimators : dict of str -> EstimatorScore
         ``"odometry"``, ``"fused"``, ``"baseline"``.
     fixes : FixCounts
+    fix_decisions : FixDecisions
+        The attempts by decision and reason, per camera, and the hint of a dominant refusal.
     acceptance_vs_range, acceptance_vs_angle : list of AcceptanceBin
         Range bins in metres, angle bins in degrees.
     n_unknown_range, n_unknown_angle : int
-        Attempts without a finite value (e.g. rejected before PnP).
+        Attempts without a finite value (refused by a per-observation gate: no pose kept).
     suspect_sources : list of SuspectSource
     kidnaps : list of KidnapRecovery
     cap_translation_m, cap_rotation_deg : float
@@ -145,6 +148,7 @@ class EvalSummary:
     distance_m: float
     estimators: dict[str, EstimatorScore]
     fixes: FixCounts
+    fix_decisions: FixDecisions
     acceptance_vs_range: list[AcceptanceBin]
     acceptance_vs_angle: list[AcceptanceBin]
     n_unknown_range: int
@@ -227,6 +231,7 @@ def evaluate(run: LocalizationRun, config: EvalConfig | None = None) -> Evaluati
         distance_m=_path_length_m(truth if truth is not None else traj.T_map_base_odometry),
         estimators=estimators,
         fixes=counts,
+        fix_decisions=fix_decisions(run.fixes),
         acceptance_vs_range=by_range,
         acceptance_vs_angle=by_angle,
         n_unknown_range=unknown_range,
@@ -359,10 +364,10 @@ def summary_to_dict(summary: EvalSummary) -> dict[str, Any]:
 
     Top-level keys: ``schema_version``, ``name``, ``has_truth``, ``passed``, ``n_stamps``,
     ``duration_s``, ``distance_m``, ``estimators`` (``odometry`` / ``fused`` / ``baseline``),
-    ``fixes``, ``acceptance_vs_range``, ``acceptance_vs_angle``, ``n_unknown_range``,
-    ``n_unknown_angle``, ``suspect_sources``, ``kidnaps``, ``cap_translation_m``,
-    ``cap_rotation_deg``, ``n_jump_steps_over_cap``, ``ladder``, ``bounds``, ``checks``,
-    ``config``.
+    ``fixes``, ``fix_decisions``, ``acceptance_vs_range``, ``acceptance_vs_angle``,
+    ``n_unknown_range``, ``n_unknown_angle``, ``suspect_sources``, ``kidnaps``,
+    ``cap_translation_m``, ``cap_rotation_deg``, ``n_jump_steps_over_cap``, ``ladder``,
+    ``bounds``, ``checks``, ``config``.
     """
     out: dict[str, Any] = {"schema_version": SUMMARY_SCHEMA_VERSION}
     for field in dataclasses.fields(summary):
@@ -374,6 +379,7 @@ def summary_to_dict(summary: EvalSummary) -> dict[str, Any]:
         if field.name == "has_truth":
             out["passed"] = summary.passed
     out["fixes"]["true_in_range_acceptance"] = _jsonable(summary.fixes.true_in_range_acceptance)
+    out["fix_decisions"] = summary.fix_decisions.to_dict()
     for key in ("acceptance_vs_range", "acceptance_vs_angle"):
         for row, b in zip(out[key], getattr(summary, key), strict=True):
             row["acceptance"] = _jsonable(b.acceptance)

@@ -12,8 +12,9 @@ into place by :meth:`RunFilesSink.close`; :meth:`RunFilesSink.abort` leaves what
 - ``localization.mcap`` (unless disabled): the published transform on ``/tf`` with the
   configured frame names and ``/localization/pose`` (``PoseWithCovarianceStamped`` of the base
   in the map) at ``output.publish_rate_hz``;
-- at :meth:`RunFilesSink.close`: ``summary.json`` (counts, ladder time per level and
-  transitions, ATE against truth when known) and ``summary.txt``.
+- at :meth:`RunFilesSink.close`: ``summary.json`` (counts, the fix attempts by decision and
+  per camera with the hint of a dominant refusal (:mod:`tagloc.eval.refusals`), ladder time
+  per level and transitions, ATE against truth when known) and ``summary.txt``.
 
 Memory is constant: running sums only.
 """
@@ -28,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from tagloc.eval.refusals import DecisionBook
 from tagloc.fileutil import AtomicTextStream, atomic_write_text
 from tagloc.geometry import SE3
 from tagloc.io.bag_writer import BagSink
@@ -74,6 +76,7 @@ class RunFilesSink:
         self._sq = {"fused": 0.0, "odometry": 0.0}
         self._n_truth = 0
         self._ladder_moves = 0
+        self.decisions = DecisionBook()
 
     def _open(self, fname: str) -> AtomicTextStream:
         self._files[fname] = AtomicTextStream(self.out_dir / fname)
@@ -97,12 +100,13 @@ class RunFilesSink:
             self.counts["fixes"] += 1
             self.counts["offered"] += not output.decision.startswith("rejected:")
             self.counts["accepted"] += output.accepted
+            self.decisions.add(output)
             self._json("fixes.jsonl", {
                 "stamp_ns": output.stamp_ns, "source": output.source,
                 "decision": output.decision, "range_m": _num(output.range_m),
                 "view_angle_rad": _num(output.view_angle_rad),
                 "false_detection": output.false_detection,
-                "d2": None if output.d2 is None else _num(output.d2),
+                "d2": None if output.d2 is None else _num(output.d2), "camera": output.camera,
             })  # fmt: skip
         elif isinstance(output, CameraFrameRecord):
             self.counts["frames"] += 1
@@ -150,6 +154,7 @@ class RunFilesSink:
             "ladder": metadata.get("ladder"), "skipped": metadata.get("skipped"),
             "suspect_sources": metadata.get("suspect_sources"),
             "odometry_calibration": metadata.get("odometry_calibration"),
+            "fix_decisions": self.decisions.result().to_dict(),
         }  # fmt: skip
         for key in ("realtime", "extrinsic_check", "camera_check"):
             if key in metadata:
@@ -166,6 +171,7 @@ class RunFilesSink:
             f"fixes: {s['fix_attempts']} observations, {s['fixes_offered']} offered to the "
             f"filter, {s['fixes_accepted']} accepted; suspect sources: {s['suspect_sources']}",
         ]
+        lines += self.decisions.result().lines()
         ladder = s.get("ladder") or {}
         if ladder:
             at = ", ".join(f"{k} {v:.1f} s" for k, v in ladder["seconds_at_level"].items() if v)

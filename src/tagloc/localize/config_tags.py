@@ -20,7 +20,7 @@ from tagloc.config import StrictModel, short_repr
 from tagloc.tags import GateConfig, NoiseModel
 from tagloc.tags.families import known_families
 
-__all__ = ["FramesConfig", "GatesConfig", "TagSensorConfig"]
+__all__ = ["FiducialConfig", "FramesConfig", "GatesConfig", "TagSensorConfig"]
 
 #: Frame names of each naming convention: (map, odometry origin, base).
 CONVENTIONS = {"ros": ("map", "odom", "base_link"), "dimos": ("map", "world", "base_link")}
@@ -91,12 +91,54 @@ class GatesConfig(StrictModel, GateConfig):
         return GateConfig(**self.model_dump(include=set(GateConfig.model_fields)))
 
 
-class TagSensorConfig(StrictModel):
-    """The tag sensor: detector, PnP mode, pixel noise and how fixes are formed.
+class FiducialConfig(StrictModel):
+    """How the fiducial fix source forms fixes from accepted tags (``localizer.yaml``: the
+    ``tags`` section's fix fields; :class:`TagSensorConfig` adds the detector and noise).
+
+    Attributes
+    ----------
+    mode : {"single", "joint"}
+        One fix per tag, or one joint PnP fix per frame over >= 2 map tags
+        (:mod:`tagloc.localize.fiducial`).
+    cov_scale : float
+        Every fix covariance is multiplied by this (default 1: no inflation). Measured on the
+        corner-level simulator with the noise model's ``sigma_px`` equal to the simulated pixel
+        noise (0.3 px), the tag sensor's covariance is *conservative*: the normalized
+        estimation error squared (NEES, 6 dof, expected 6) of the base pose averages 2.4-3 at
+        every range from 1 to 8 m, mostly because the ambiguity mixture folds the other IPPE
+        branch in. Shrinking it (0.5) let correlated errors of consecutive far frames pull the
+        estimate, inflating it (2-5) changed the ATE by < 1 cm: left at 1.
+    min_cov_translation_m, min_cov_rotation_rad : float
+        Floor on each translation (m) / rotation (rad) standard deviation of a fix (extrinsics
+        and map survey error that the per-frame covariance does not know of).
+    prior_rotation_sigma_rad : float
+        1-sigma of the filter's orientation handed to the ambiguity policy, rad.
+    ambiguity_log_odds_with_prior : float or None
+        The ambiguity policy's evidence threshold while the filter has an estimate (None: the
+        gates' own, 18.4). The filter's chi-square gate refuses a flipped branch (its base pose
+        is off by about range x twice the viewing angle), and the accepted covariance already
+        carries the other branch's weight, so a 100:1 posterior (9.2) suffices; it keeps far,
+        near-frontal tags (3-8 m) usable, which bridge stretches where no tag is close.
+    shared_quad_px : float
+        Two detections whose corners all lie within this distance (px) are one quad read as
+        two ids (a glint; :mod:`tagloc.localize.fiducial`, step 4).
+    """
+
+    mode: Literal["single", "joint"] = "single"
+    cov_scale: float = Field(1.0, gt=0, le=1e6)
+    min_cov_translation_m: float = Field(0.005, ge=0, le=1e3)
+    min_cov_rotation_rad: float = Field(0.002, ge=0, le=4)
+    prior_rotation_sigma_rad: float = Field(0.05, gt=0, le=4)
+    ambiguity_log_odds_with_prior: float | None = Field(9.2, ge=0, le=1e6)
+    shared_quad_px: float = Field(3.0, ge=0, le=1e4)
+
+
+class TagSensorConfig(FiducialConfig):
+    """The tag sensor: detector, pixel noise, and how fixes are formed (inherited from
+    :class:`FiducialConfig`: one definition, one default each).
 
     ``noise`` is the corner noise model (:class:`~tagloc.tags.NoiseModel`; ``sigma_px`` is
-    the one number to calibrate on your detector). The rest are the fix source's tunables
-    (:class:`~tagloc.localize.fiducial.FiducialConfig` documents each and how it was set).
+    the one number to calibrate on your detector).
     """
 
     #: Detector backend for images (``apriltag``: the AprilTag 3 library; ``aruco``: OpenCV).
@@ -110,17 +152,4 @@ class TagSensorConfig(StrictModel):
             raise ValueError(f"unknown tag family {short_repr(family)}; known: {known_families()}")
         return family
 
-    #: One fix per tag (``single``) or one joint PnP fix per frame over >= 2 tags (``joint``).
-    mode: Literal["single", "joint"] = "single"
     noise: NoiseModel = NoiseModel()
-    #: Every fix covariance is multiplied by this.
-    cov_scale: float = Field(1.0, gt=0, le=1e6)
-    #: Floor on each translation (m) and rotation (rad) standard deviation of a fix.
-    min_cov_translation_m: float = Field(0.005, ge=0, le=1e3)
-    min_cov_rotation_rad: float = Field(0.002, ge=0, le=4)
-    #: 1-sigma of the filter's orientation handed to the ambiguity policy, rad.
-    prior_rotation_sigma_rad: float = Field(0.05, gt=0, le=4)
-    #: The ambiguity evidence threshold while the filter has an estimate (None: the gates').
-    ambiguity_log_odds_with_prior: float | None = Field(9.2, ge=0, le=1e6)
-    #: Two detections whose corners all lie within this distance (px) are one quad.
-    shared_quad_px: float = Field(3.0, ge=0, le=1e4)

@@ -12,7 +12,8 @@ Steps for one frame (:meth:`FiducialFixSource.frame_fixes`):
    is wrong, and only the filter's kidnap test may decide that).
 3. One fix per accepted tag: ``T_map_base = T_map_tag @ T_cam_tag^-1 @ T_base_cam^-1`` with the
    covariance transported from ``cov_cam_tag`` (and the tag's survey covariance if the map has
-   one), then inflated (``cov_scale``, see :class:`FiducialConfig`).
+   one), then inflated (``cov_scale``, see
+   :class:`~tagloc.localize.config_tags.FiducialConfig`).
 4. One quad decoded as two ids (a glint: a real tag's corners read as another id) cannot be
    both: the reading nearest the prior is kept, the others refused (``shared_quad``); without a
    prior all are refused. (Left to the chi-square gate alone, such glints would be rejected
@@ -34,13 +35,13 @@ import math
 from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 
 from tagloc._types import FloatArray
 from tagloc.camera import CameraModel
 from tagloc.geometry import SE3
+from tagloc.localize.config_tags import FiducialConfig
 from tagloc.localize.fix import FixQuality, TagFix
 from tagloc.tags import (
     GateConfig,
@@ -61,47 +62,6 @@ __all__ = ["FiducialConfig", "FiducialFixSource", "FrameFixes", "ObservationReje
 
 #: An upright base's up axis (REP-103 ``base_link``).
 E_Z = np.array([0.0, 0.0, 1.0])
-
-
-@dataclass(frozen=True, slots=True)
-class FiducialConfig:
-    """Tunables of the fix source.
-
-    Attributes
-    ----------
-    cov_scale : float
-        Every fix covariance is multiplied by this (default 1: no inflation). Measured on the
-        corner-level simulator with the noise model's ``sigma_px`` equal to the simulated pixel
-        noise (0.3 px), the tag sensor's covariance is *conservative*: the normalized
-        estimation error squared (NEES, 6 dof, expected 6) of the base pose averages 2.4-3 at
-        every range from 1 to 8 m, mostly because the ambiguity mixture folds the other IPPE
-        branch in. Shrinking it (0.5) let correlated errors of consecutive far frames pull the
-        estimate, inflating it (2-5) changed the ATE by < 1 cm: left at 1.
-    min_cov_translation_m, min_cov_rotation_rad : float
-        Floor on each translation / rotation standard deviation of a fix (extrinsics and map
-        survey error that the per-frame covariance does not know of).
-    mode : {"single", "joint"}
-        One fix per tag, or one joint PnP fix per frame over >= 2 map tags (module docstring).
-    prior_rotation_sigma_rad : float
-        1-sigma of the filter's orientation handed to the ambiguity policy.
-    ambiguity_log_odds_with_prior : float or None
-        The ambiguity policy's evidence threshold while the filter has an estimate (None: the
-        gates' own, 18.4). The filter's chi-square gate refuses a flipped branch (its base pose
-        is off by about range x twice the viewing angle), and the accepted covariance already
-        carries the other branch's weight, so a 100:1 posterior (9.2) suffices; it keeps far,
-        near-frontal tags (3-8 m) usable, which bridge stretches where no tag is close.
-    shared_quad_px : float
-        Two detections whose corners all lie within this distance are one quad read as two ids
-        (step 4 of the module docstring).
-    """
-
-    cov_scale: float = 1.0
-    min_cov_translation_m: float = 0.005
-    min_cov_rotation_rad: float = 0.002
-    mode: Literal["single", "joint"] = "single"
-    prior_rotation_sigma_rad: float = 0.05
-    ambiguity_log_odds_with_prior: float | None = 9.2
-    shared_quad_px: float = 3.0
 
 
 @dataclass(frozen=True, slots=True)

@@ -59,6 +59,7 @@ from tagloc.localize.outputs import NodeOutput, OutputSink
 from tagloc.localize.registry import build_fix_sources
 from tagloc.localize.source_tags import TagSource
 from tagloc.localize.sources import Arrival, FixContext, FixSource, SkipCounter, SourceInputs
+from tagloc.localize.tag_cameras import NodeCamera
 from tagloc.localize.work_queue import WorkQueue
 from tagloc.messages import (
     FrameTruth,
@@ -72,7 +73,7 @@ from tagloc.supervise import EstimatorState, Supervisor
 from tagloc.tags import TagDetection, TagDetector, TagMap
 from tagloc.units import S_NS
 
-__all__ = ["FrameTruth", "LocalizerNode", "NodeTopics"]
+__all__ = ["FrameTruth", "LocalizerNode", "NodeCamera", "NodeTopics"]
 
 logger = logging.getLogger(__name__)
 
@@ -99,10 +100,15 @@ class LocalizerNode:
     premap : (N, 3) float, optional
         The point cloud map (in the map frame, m) the lidar sweeps are registered against;
         prepared once here. None (or ``lidar.enabled: false``): the lidar topic is ignored.
+    cameras : sequence of NodeCamera, optional
+        Every camera of the rig, each on its own topics with its model and extrinsics
+        (:mod:`tagloc.localize.tag_cameras`); instead of ``camera`` / ``T_base_cam`` and the
+        topics' camera roles. Default: one camera on ``topics``.
 
     Raises
     ------
     LocalizeError
+        If two cameras share a name or topic, or are given beside ``camera`` / ``T_base_cam``.
         If the premap is not a finite ``(N, 3)`` array of at least 10 points, or misses every
         tag of the map frame (:func:`~tagloc.localize.source_lidar.check_premap_overlap`).
     """
@@ -112,13 +118,13 @@ class LocalizerNode:
         sinks: Sequence[OutputSink] = (), *, camera: CameraModel | None = None,
         T_base_cam: SE3 | None = None, topics: NodeTopics | None = None,
         detector: TagDetector | None = None, frame_truth: Mapping[int, FrameTruth] | None = None,
-        premap: np.ndarray | None = None,
+        premap: np.ndarray | None = None, cameras: Sequence[NodeCamera] = (),
     ) -> None:  # fmt: skip
         cfg = config or LocalizerConfig()
         self._config, self._topics, self._sinks = cfg, topics or NodeTopics(), tuple(sinks)
         self._fusion = Fusion(cfg, self._on_event)
         inputs = SourceInputs(tag_map, self._topics, camera, T_base_cam, detector,
-                              frame_truth or {}, premap)  # fmt: skip
+                              frame_truth or {}, premap, tuple(cameras))  # fmt: skip
         self._sources: tuple[FixSource, ...] = build_fix_sources(cfg, inputs)
         self._tags = next((s for s in self._sources if isinstance(s, TagSource)), None)
         self.supervisor = Supervisor(
@@ -170,9 +176,14 @@ class LocalizerNode:
 
     @property
     def T_base_cam(self) -> SE3 | None:
-        """The extrinsics in use (given, or the stream's static transform once a frame needed
-        it; None yet)."""
+        """The (first camera's) extrinsics in use (given, or the stream's static transform once
+        a frame needed it; None yet)."""
         return None if self._tags is None else self._tags.T_base_cam
+
+    @property
+    def camera_names(self) -> tuple[str, ...]:
+        """The cameras fixes come from (``("",)``: the one camera on :attr:`topics`)."""
+        return () if self._tags is None else self._tags.camera_names
 
     @property
     def skipped(self) -> Counter[str]:

@@ -63,6 +63,9 @@ class FixAttempt:
     d2 : float or None
         The squared Mahalanobis distance the filter tested the fix with, when it did (not for
         a fix decided in a batch: start-up, re-acquisition, kidnap).
+    camera : str
+        The camera whose frame the fix came from (``""``: the node's only camera, or not a
+        camera's fix).
     """
 
     stamp_ns: int
@@ -75,6 +78,7 @@ class FixAttempt:
     view_angle_rad: float
     false_detection: bool | None = None
     d2: float | None = None
+    camera: str = ""
 
     @property
     def accepted(self) -> bool:

@@ -1,12 +1,14 @@
 """The fiducial fix source of the node: camera frames to tag fixes (:class:`TagSource`).
 
-A frame is pre-detected corners (``TagDetectionsMsg`` on ``topics.detections``), an image run
-through the configured detector (``ImageMsg`` on ``topics.image``), or fixes formed on a worker
-thread (:meth:`TagSource.fixer`, :meth:`TagSource.arrive_fixed`). It waits in the node's queue
-until the odometry covers its stamp; then :class:`~tagloc.localize.fiducial.FiducialFixSource`
-(built on first use, once the camera model, from ``CameraInfoMsg`` unless given, and the
-extrinsics, from the stream's static ``base -> <frame_id>`` unless given, are known) forms its
-fixes with the filter's estimate as the orientation prior.
+Frames come from every camera of the rig (:mod:`tagloc.localize.tag_cameras`: the cameras
+given, each on its own topics, or one camera on ``topics``). A frame is pre-detected corners
+(``TagDetectionsMsg``), an image run through the configured detector (``ImageMsg``), or fixes
+formed on a worker thread (:meth:`TagSource.fixer`, :meth:`TagSource.arrive_fixed`; the first
+camera's). It waits in the node's queue until the odometry covers its stamp; then its camera's
+:class:`~tagloc.localize.fiducial.FiducialFixSource` (built on first use, once the camera
+model, from ``CameraInfoMsg`` unless given, and the extrinsics, from the stream's static
+``base -> <frame_id>`` unless given, are known) forms its fixes with the filter's estimate as
+the orientation prior; each fix's record names its camera.
 
 Its own skips: ``frame_duplicate_stamp``, ``image_size_mismatch``, ``detector_error``,
 ``no_camera_info``, ``no_extrinsics``.
@@ -16,7 +18,6 @@ from __future__ import annotations
 
 import logging
 import math
-from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -28,7 +29,7 @@ from tagloc.camera import CameraModel, from_camera_info
 from tagloc.errors import TransformLookupError
 from tagloc.geometry import SE3
 from tagloc.localize.config import LocalizerConfig
-from tagloc.localize.fiducial import E_Z, FiducialConfig, FiducialFixSource, FrameFixes
+from tagloc.localize.fiducial import E_Z, FiducialFixSource, FrameFixes
 from tagloc.localize.run import CameraFrameRecord, FixAttempt
 from tagloc.localize.sources import (
     Arrival,
@@ -39,6 +40,7 @@ from tagloc.localize.sources import (
     SourceResult,
     Work,
 )
+from tagloc.localize.tag_cameras import CameraSlot, camera_slots
 from tagloc.messages import CameraInfoMsg, ImageMsg, Message, TagDetectionsMsg
 from tagloc.supervise import FixSourceSpec
 from tagloc.tags import TagDetection
@@ -50,8 +52,6 @@ __all__ = ["MARKERS", "TagSource"]
 MARKERS = "markers"
 #: Camera frames that may wait for odometry to cover their stamp (30 s at 30 Hz).
 _MAX_PENDING = 900
-#: Frame stamps remembered to refuse duplicates (a bounded set of the newest).
-_RECENT_FRAMES = 1024
 _NAN6 = np.full((6, 6), np.nan)
 _NAN6.flags.writeable = False
 
@@ -65,6 +65,7 @@ class _Frame:
     frame_id: str
     detections: tuple[TagDetection, ...]
     fixes: FrameFixes | None = None  # formed elsewhere (the wall clock's worker)
+    slot: CameraSlot | None = None  # None: the first camera
 
 
 class TagSource:
@@ -78,35 +79,47 @@ class TagSource:
 
     def __init__(self, config: LocalizerConfig, inputs: SourceInputs) -> None:
         self._config, self._inputs = config, inputs
-        self._camera, self._detector = inputs.camera, inputs.detector
-        self._source: FiducialFixSource | None = None
-        self._recent: OrderedDict[int, None] = OrderedDict()
+        self._detector = inputs.detector
+        self._slots = camera_slots(inputs.cameras, inputs.topics, inputs.camera,
+                                   inputs.T_base_cam)  # fmt: skip
         self.skipped = SkipCounter()
 
     @property
     def camera(self) -> CameraModel | None:
-        """The camera model in use (given, or from the first ``CameraInfoMsg``; None yet)."""
-        return self._camera
+        """The first camera's model (given, or from the first ``CameraInfoMsg``; None yet)."""
+        return self._slots[0].camera
 
     @property
     def T_base_cam(self) -> SE3 | None:
-        """The extrinsics in use (given, or the stream's once a frame needed them; None yet)."""
-        if self._inputs.T_base_cam is not None:
-            return self._inputs.T_base_cam
-        return None if self._source is None else self._source.T_base_cam
+        """The first camera's extrinsics (given, or the stream's once a frame needed them)."""
+        return self.extrinsics(self._slots[0])
+
+    @property
+    def camera_names(self) -> tuple[str, ...]:
+        """The cameras, in order (``("",)``: the one camera on the node's topics)."""
+        return tuple(s.name for s in self._slots)
+
+    @staticmethod
+    def extrinsics(slot: CameraSlot) -> SE3 | None:
+        if slot.spec.T_base_cam is not None:
+            return slot.spec.T_base_cam
+        return None if slot.source is None else slot.source.T_base_cam
 
     # ----- FixSource -------------------------------------------------------------------------
     def arrive(self, topic: str, msg: Message) -> Arrival | None:
-        t = self._inputs.topics
-        if isinstance(msg, TagDetectionsMsg) and topic == t.detections:
-            return self._frame(_Frame(msg.stamp_ns, msg.frame_id, msg.detections))
-        if isinstance(msg, ImageMsg) and topic == t.image:
-            detections = self._detect(msg)
-            return None if detections is None else self._frame(
-                _Frame(msg.stamp_ns, msg.frame_id, detections)
-            )  # fmt: skip
-        if isinstance(msg, CameraInfoMsg) and topic == t.camera_info and self._camera is None:
-            self._camera = from_camera_info(msg.info, f"{topic} CameraInfo")
+        for slot in self._slots:
+            spec = slot.spec
+            if isinstance(msg, TagDetectionsMsg) and topic == spec.detections_topic:
+                return self._frame(_Frame(msg.stamp_ns, msg.frame_id, msg.detections, None, slot))
+            if isinstance(msg, ImageMsg) and topic == spec.image_topic:
+                detections = self._detect(msg, slot)
+                return None if detections is None else self._frame(
+                    _Frame(msg.stamp_ns, msg.frame_id, detections, None, slot)
+                )  # fmt: skip
+            if isinstance(msg, CameraInfoMsg) and topic == spec.camera_info_topic:
+                if slot.camera is None:
+                    slot.camera = from_camera_info(msg.info, f"{topic} CameraInfo")
+                return None
         return None
 
     def arrive_fixed(
@@ -120,7 +133,8 @@ class TagSource:
         """One frame: its fixes (with the filter's estimate as the prior), refusals, record."""
         assert isinstance(payload, _Frame)
         frame = payload
-        source = self._fix_source(frame, context, quiet=False)
+        slot = frame.slot or self._slots[0]
+        source = self._fix_source(slot, frame, context, quiet=False)
         if source is None:
             return None
         truth = self._inputs.frame_truth.get(frame.stamp_ns)
@@ -143,6 +157,7 @@ class TagSource:
                 frame.stamp_ns, "" if r.tag_id is None else f"tag:{r.tag_id}",
                 () if r.tag_id is None else (r.tag_id,), SE3.identity(), _NAN6,
                 f"rejected:{r.reason}", r.range_m, math.nan, r.false_detection,
+                camera=slot.name,
             )
             for r in result.rejects
         )  # fmt: skip
@@ -152,6 +167,7 @@ class TagSource:
                 FixAttempt(
                     s.fix.stamp_ns, s.fix.source, s.tag_ids, s.fix.T_map_base, s.fix.cov, "",
                     s.fix.quality.range_m, s.fix.quality.view_angle_rad, s.false_detection,
+                    camera=slot.name,
                 ),
                 dof, s.fix.quality.reproj_err_px,
             )
@@ -166,8 +182,8 @@ class TagSource:
 
     def reset(self) -> None:
         """Forget the frame stamps seen and the extrinsics looked up on the old timeline."""
-        self._recent.clear()
-        self._source = None
+        for slot in self._slots:
+            slot.reset()
 
     def metadata(self) -> dict[str, Any]:
         return {}
@@ -181,7 +197,8 @@ class TagSource:
         thread (None until the camera model and extrinsics are known); ``prior()`` is called
         when it runs, for the orientation prior; ``T_odom_base`` (the odometry about the frame's
         stamp) gives "up" for a gravity-aligned odometry."""
-        source = self._fix_source(_Frame(stamp_ns, frame_id, ()), context, quiet=True)
+        slot = self._slots[0]
+        source = self._fix_source(slot, _Frame(stamp_ns, frame_id, ()), context, quiet=True)
         if source is None:
             return None
 
@@ -195,16 +212,13 @@ class TagSource:
     # ----- internals -------------------------------------------------------------------------
     def _frame(self, frame: _Frame) -> Arrival:
         stamp = frame.stamp_ns
-        if stamp in self._recent:
+        if (frame.slot or self._slots[0]).seen(stamp):
             self.skipped.skip("frame_duplicate_stamp", f"camera frame at {stamp} ns")
             return Arrival(stamp, tick=True)
-        self._recent[stamp] = None
-        if len(self._recent) > _RECENT_FRAMES:
-            self._recent.popitem(last=False)
         return Arrival(stamp, tick=True, work=Work(stamp, stamp, frame))
 
-    def _detect(self, msg: ImageMsg) -> tuple[TagDetection, ...] | None:
-        cam = self._camera
+    def _detect(self, msg: ImageMsg, slot: CameraSlot) -> tuple[TagDetection, ...] | None:
+        cam = slot.camera
         if cam is not None and msg.image.shape[:2] != (cam.height, cam.width):
             h, w = msg.image.shape[:2]
             self.skipped.skip(
@@ -224,17 +238,17 @@ class TagSource:
             return None
 
     def _fix_source(
-        self, frame: _Frame, context: FixContext, *, quiet: bool
+        self, slot: CameraSlot, frame: _Frame, context: FixContext, *, quiet: bool
     ) -> FiducialFixSource | None:
-        if self._source is not None:
-            return self._source
-        if self._camera is None:
+        if slot.source is not None:
+            return slot.source
+        if slot.camera is None:
             if not quiet:
                 detail = f"frame at {frame.stamp_ns} ns before CameraInfo"
                 self.skipped.skip("no_camera_info", detail)
             return None
         cfg = self._config
-        T_base_cam = self._inputs.T_base_cam
+        T_base_cam = slot.spec.T_base_cam
         if T_base_cam is None:
             try:
                 T_base_cam = context.buffer.lookup(
@@ -245,25 +259,18 @@ class TagSource:
                     self.skipped.skip("no_extrinsics", str(exc))
                 return None
         tags = cfg.tags
-        fid = FiducialConfig(
-            cov_scale=tags.cov_scale, min_cov_translation_m=tags.min_cov_translation_m,
-            min_cov_rotation_rad=tags.min_cov_rotation_rad, mode=tags.mode,
-            prior_rotation_sigma_rad=tags.prior_rotation_sigma_rad,
-            ambiguity_log_odds_with_prior=tags.ambiguity_log_odds_with_prior,
-            shared_quad_px=tags.shared_quad_px,
-        )  # fmt: skip
-        self._source = FiducialFixSource(
-            self._camera, T_base_cam, self._inputs.tag_map, family=tags.family,
-            gates=cfg.gates.observation_gates(), noise=tags.noise, config=fid,
+        slot.source = FiducialFixSource(
+            slot.camera, T_base_cam, self._inputs.tag_map, family=tags.family,
+            gates=cfg.gates.observation_gates(), noise=tags.noise, config=tags,
             map_frame=cfg.frames.map_frame,
             up_base=E_Z if cfg.odometry_frame.knows_up else None,
         )  # fmt: skip
-        if not cfg.odometry_frame.knows_up:
+        if not cfg.odometry_frame.knows_up and slot is self._slots[0]:
             logger.warning(
                 "the odometry frame knows no up (odometry_frame.base_up_axis: null): tag fixes "
                 "run without the gravity prior"
             )
-        return self._source
+        return slot.source
 
     def _up_base(self, context: FixContext, stamp_ns: int) -> FloatArray | None:
         """"Up" in the base at ``stamp_ns`` for a gravity-aligned odometry (None: the fix

@@ -37,6 +37,7 @@ from tagloc.geometry import SE3
 from tagloc.localize.filter import MapOdomFilter
 from tagloc.localize.fix import PartialFix, TagFix
 from tagloc.localize.run import CameraFrameRecord, FixAttempt
+from tagloc.localize.tag_cameras import NodeCamera
 from tagloc.messages import FrameTruth, Message, NodeTopics
 from tagloc.supervise import FixSourceSpec
 from tagloc.tags import TagDetection, TagDetector, TagMap
@@ -167,6 +168,8 @@ class SourceInputs:
     detector: TagDetector | None = None
     frame_truth: Mapping[int, FrameTruth] = field(default_factory=dict)
     premap: np.ndarray | None = None
+    #: Every camera of the rig on its own topics (empty: one camera on ``topics``).
+    cameras: tuple[NodeCamera, ...] = ()
 
 
 class FixSource(Protocol):
