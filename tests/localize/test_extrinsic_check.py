@@ -42,7 +42,7 @@ def _error(T_est: SE3, T_true: SE3) -> tuple[float, float]:
     return math.degrees(float(np.linalg.norm(d[3:]))), float(np.hypot(d[0], d[2]))
 
 
-def _planar_drive(seed: int, n: int = 3000) -> tuple[np.ndarray, SE3, SE3]:
+def _planar_drive(seed: int, n: int = 9000) -> tuple[np.ndarray, SE3, SE3]:
     """A planar drive at 100 Hz that turns (yaw rate varies) and its true ``T_map_base``;
     odometry = truth (drift is the slow tests' business)."""
     rng = np.random.default_rng(seed)
@@ -136,10 +136,11 @@ def test_the_streaming_recorder_agrees_with_the_whole_run_in_bounded_memory() ->
     check = recorder.check(used)
     assert oracle is not None and check is not None
     assert np.allclose(check.xi, oracle.xi, atol=1e-9) and check.n_pairs == oracle.n_pairs
-    assert len(recorder._stamps) == 500  # the odometry kept: the window, not the drive
+    held = recorder.held  # the odometry kept: the window (to twice it), not the drive
+    assert held["fixes"] == sum(f.accepted for f in released) and 500 <= held["odometry"] <= 1000
     capped = ExtrinsicRecorder(max_fixes=40, odometry_window=500)
     _streamed(capped, stamps, T_odom_base, fixes)
-    assert [f.stamp_ns for f in capped.fixes] == [f.stamp_ns for f in fixes[:40]]
+    assert capped.held["fixes"] == 40
 
 
 def _wheel_scenario(duration_s: float):  # type: ignore[no-untyped-def]

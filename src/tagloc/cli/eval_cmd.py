@@ -97,15 +97,17 @@ def print_summary(summary: EvalSummary) -> None:
     console.print(checks_table(summary.checks))
 
 
-def checks_table(checks: Sequence[Check]) -> Table:
-    """Pass/fail checks as a rich table (check, value, target, result)."""
+def checks_table(checks: Sequence[Check], undecided: str = "n/a") -> Table:
+    """Pass/fail checks as a rich table (check, value, target, result); ``undecided``: the
+    result of a check with a value but no verdict (else "n/a")."""
     from rich.table import Table
 
     out = Table(title="checks")
     for column in ("check", "value", "target", "result"):
         out.add_column(column, justify="right")
     for c in checks:
-        result = {True: "[green]pass[/]", False: "[red]FAIL[/]", None: "n/a"}[c.passed]
+        none = undecided if math.isfinite(c.value) else "n/a"
+        result = {True: "[green]pass[/]", False: "[red]FAIL[/]", None: none}[c.passed]
         out.add_row(c.name, _num(c.value, 4, "g"), c.target, result)
     return out
 

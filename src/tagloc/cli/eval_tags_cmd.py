@@ -102,4 +102,4 @@ def print_tag_sweep(result: TagSweepResult) -> None:
         f"NEES/dof {nees}, per frame: detection {result.detect_ms:.1f} ms,"
         f" PnP + covariance + gates {result.rest_ms:.2f} ms"
     )
-    console.print(checks_table(result.checks))
+    console.print(checks_table(result.checks, undecided="inconclusive"))

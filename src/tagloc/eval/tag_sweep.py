@@ -38,8 +38,8 @@ from tagloc.eval.tag_sweep_stats import (
     ViewOutcome,
     cell_row,
     pooled_nees_per_dof,
-    sweep_checks,
 )
+from tagloc.eval.tag_sweep_verdicts import sweep_checks
 from tagloc.eval.tag_views import SweepStack, pose_prior, rotation_error_deg, sample_wall_view
 from tagloc.geometry import SE3
 from tagloc.sim.render import render_tags_scene
@@ -156,7 +156,7 @@ def _evaluate_view(
     result = observe_tags(
         detections,
         stack.camera,
-        config.tag_size_m,
+        config.tag_size_m if config.sensor_tag_size_m is None else config.sensor_tag_size_m,
         config.gates,
         tag_poses={tag_id: T_map_cam @ T_cam_tag},
         prior=prior,

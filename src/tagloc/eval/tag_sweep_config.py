@@ -81,6 +81,8 @@ class TagSweepConfig(StrictModel):
     Camera and tag
         An undistorted pinhole ``image_width x image_height`` with horizontal field of view
         ``hfov_deg`` (square pixels, principal point at the center); ``tag_size_m``, ``family``.
+        ``sensor_tag_size_m``: the size the sensor is told (default: ``tag_size_m``); another
+        value shows what a tag printed at the wrong size, or a wrong size in the map, does.
     Sensor stack
         ``backend`` and ``detector_options`` (:func:`tagloc.tags.make_detector`), ``gates``,
         ``noise`` (None: ``NoiseModel(sigma_px=DEFAULT_SIGMA_PX[backend])``), and the
@@ -107,6 +109,7 @@ class TagSweepConfig(StrictModel):
     image_height: int = Field(720, ge=16)
     hfov_deg: float = Field(90.0, gt=1.0, lt=170.0)
     tag_size_m: float = Field(0.16, gt=0.0)
+    sensor_tag_size_m: float | None = Field(None, gt=0.0)
     family: str = "tag36h11"
     backend: str = "apriltag"
     detector_options: dict[str, bool | int | float | str] = Field(default_factory=dict)

@@ -147,7 +147,8 @@ def check_lines(checks: Sequence[Check]) -> list[str]:
     lines = ["| check | value | target | result |", "|---|---:|---|---|"]
     for c in checks:
         value = f"{c.value:.4g}" if math.isfinite(c.value) else "n/a"
-        result = {True: "pass", False: "**FAIL**", None: "n/a"}[c.passed]
+        none = "inconclusive" if math.isfinite(c.value) else "n/a"
+        result = {True: "pass", False: "**FAIL**", None: none}[c.passed]
         lines.append(f"| {c.name} | {value} | {c.target} | {result} |")
     return lines
 

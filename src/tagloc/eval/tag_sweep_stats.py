@@ -1,8 +1,8 @@
-"""Per-cell statistics of a tag-sensor sweep and the checks (pure functions).
+"""Per-cell statistics of a tag-sensor sweep (pure functions).
 
 :class:`ViewOutcome` is one scored view (:mod:`tagloc.eval.tag_sweep`); :func:`cell_row` turns a
-cell's views into a :class:`TagSweepRow`; :func:`sweep_checks` tests the rows against
-:class:`~tagloc.eval.tag_sweep_config.TagSweepTargets`.
+cell's views into a :class:`TagSweepRow`; the checks of the rows against
+:class:`~tagloc.eval.tag_sweep_config.TagSweepTargets` are :mod:`tagloc.eval.tag_sweep_verdicts`'.
 """
 
 from __future__ import annotations
@@ -14,9 +14,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-
-from tagloc.eval.summary import Check
-from tagloc.eval.tag_sweep_config import TagSweepConfig
 
 #: Degrees of freedom of a pose's NEES.
 POSE_DOF = 6
@@ -112,6 +109,9 @@ class TagSweepRow:
         Detections of ids that were not in the image.
     rejections : tuple of (str, int)
         Why views were not accepted (``"missed"``: not detected), most frequent first.
+    position_errors_m, rotation_errors_deg, nees_values : tuple of float
+        The accepted views' values the medians and the mean are of (for the checks' intervals,
+        :mod:`tagloc.eval.tag_sweep_verdicts`).
     """
 
     distance_m: float
@@ -136,6 +136,9 @@ class TagSweepRow:
     rest_ms: float
     false_detections: int
     rejections: tuple[tuple[str, int], ...]
+    position_errors_m: tuple[float, ...] = ()
+    rotation_errors_deg: tuple[float, ...] = ()
+    nees_values: tuple[float, ...] = ()
 
 
 def percentile_or_nan(values: list[float], q: float) -> float:
@@ -184,6 +187,9 @@ def cell_row(
         rest_ms=1e3 * float(np.median([v.rest_s for v in views])) if n else math.nan,
         false_detections=sum(v.false_detections for v in views),
         rejections=tuple(sorted(reasons.items(), key=lambda kv: (-kv[1], kv[0]))),
+        position_errors_m=tuple(position),
+        rotation_errors_deg=tuple(rotation),
+        nees_values=tuple(v.nees for v in accepted),
     )
 
 
@@ -193,89 +199,6 @@ def pooled_nees_per_dof(rows: Sequence[TagSweepRow]) -> float:
     if n == 0:
         return math.nan
     return sum(r.n_accepted * r.nees_per_dof for r in rows if r.n_accepted) / n
-
-
-def _worst(values: list[float]) -> float:
-    """Largest finite value (NaN if none)."""
-    finite = [v for v in values if math.isfinite(v)]
-    return max(finite) if finite else math.nan
-
-
-def _at_most(name: str, value: float, limit: float, unit: str) -> Check:
-    ok = None if math.isnan(value) else value <= limit
-    return Check(name, value, f"<= {limit:g} {unit}".rstrip(), ok)
-
-
-def sweep_checks(config: TagSweepConfig, rows: Sequence[TagSweepRow]) -> list[Check]:
-    """The targets on a sweep's rows (value NaN and ``passed`` None where the sweep has
-    no cell to judge, e.g. no 2 m distance).
-
-    - position error median at 2 m and at 4 m: the worst cell (every angle with an accepted
-      view) of the reference condition;
-    - rotation error median at 2 m for views ``rotation_min_angle_deg`` or more off face-on;
-    - accepted ambiguity flips, whole sweep;
-    - mean NEES / dof of every accepted estimate of the sweep, within the band;
-    - acceptance pooled over the reference condition's views within ``acceptance_max_distance_m``
-      at ``acceptance_angles_deg``.
-    """
-    t = config.targets
-    blur, noise = config.reference_condition
-    ref = [r for r in rows if r.blur_px == blur and r.noise_dn == noise]
-
-    def at(distance: float, min_angle: float = 0.0) -> list[TagSweepRow]:
-        return [r for r in ref if math.isclose(r.distance_m, distance) and r.angle_deg >= min_angle]
-
-    checks = [
-        _at_most(
-            "position error median at 2 m (worst angle)",
-            _worst([r.position_error_median_m for r in at(2.0)]),
-            t.position_median_2m_m,
-            "m",
-        ),
-        _at_most(
-            "position error median at 4 m (worst angle)",
-            _worst([r.position_error_median_m for r in at(4.0)]),
-            t.position_median_4m_m,
-            "m",
-        ),
-        _at_most(
-            f"rotation error median at 2 m, >= {t.rotation_min_angle_deg:g} deg (worst angle)",
-            _worst([r.rotation_error_median_deg for r in at(2.0, t.rotation_min_angle_deg)]),
-            t.rotation_median_2m_deg,
-            "deg",
-        ),
-        _at_most(
-            "accepted ambiguity flips (all cells)", sum(r.flips for r in rows), t.max_flips, ""
-        ),
-    ]
-    low, high = t.nees_per_dof_band
-    nees = pooled_nees_per_dof(rows)
-    checks.append(
-        Check(
-            "NEES / dof of accepted estimates (all cells)",
-            nees,
-            f"in [{low:g}, {high:g}]",
-            None if math.isnan(nees) else low <= nees <= high,
-        )
-    )
-    lo_deg, hi_deg = t.acceptance_angles_deg
-    band = [
-        r
-        for r in ref
-        if r.distance_m <= t.acceptance_max_distance_m and lo_deg <= r.angle_deg <= hi_deg
-    ]
-    n = sum(r.n_views for r in band)
-    acceptance = sum(r.n_accepted for r in band) / n if n else math.nan
-    checks.append(
-        Check(
-            f"acceptance within {t.acceptance_max_distance_m:g} m at "
-            f"{lo_deg:g}-{hi_deg:g} deg (pooled)",
-            acceptance,
-            f">= {t.acceptance_min:g}",
-            None if math.isnan(acceptance) else acceptance >= t.acceptance_min,
-        )
-    )
-    return checks
 
 
 def conditions(rows: Sequence[TagSweepRow]) -> list[tuple[float, float]]:
