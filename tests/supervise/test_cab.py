@@ -48,7 +48,7 @@ def test_a_ride_without_door_news_walks_every_state_once() -> None:
     moves += _frames(h, 5, 8, cab=True, map_=True)  # walking in: the cab's tags and the lobby's
     moves += _frames(h, 8, 20, cab=True, map_=False)  # doors closed, riding
     moves += _frames(h, 20, 21, cab=True, map_=True)  # doors open on the landing
-    moves += _frames(h, 21, 23, cab=True, map_=True, odometer_m=1.2)  # walking out
+    moves += _frames(h, 21, 23, cab=False, map_=True, odometer_m=1.2)  # walking out
     assert [m.to_state for m in moves] == [
         CabState.BOARDING, CabState.IN_CAB, CabState.ALIGHTING, CabState.IN_MAP
     ]  # fmt: skip
@@ -100,7 +100,8 @@ def test_glimpses_shorter_than_the_dwell_never_board(bursts: list[tuple[float, i
 
 
 def test_the_ladder_ignores_the_lidar_in_the_cab_at_once() -> None:
-    specs = [FixSourceSpec("markers", "markers", "camera"), FixSourceSpec("lidar", "lidar", "lidar")]
+    specs = [FixSourceSpec("markers", "markers", "camera"),
+             FixSourceSpec("lidar", "lidar", "lidar")]  # fmt: skip
     sup = Supervisor(SupervisorConfig(), specs, 10.0, 5.0, ElevatorConfig())
     good = EstimatorState(True, False, 0.1, 0.1)
     moves = []
@@ -112,7 +113,7 @@ def test_the_ladder_ignores_the_lidar_in_the_cab_at_once() -> None:
             assert sup.handoff is not None
             sup.handoff.door(t, CAB, False)  # not boarding: the topic alone moves nothing
             sup.handoff.frame(t, frozenset({CAB}), False)
-        if 100 < k and k % 3 == 0:
+        if k > 100 and k % 3 == 0:
             sup.handoff.frame(t, frozenset({CAB}), False)  # type: ignore[union-attr]
         move = sup.step(t, good)
         if move is not None:

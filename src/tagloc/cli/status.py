@@ -78,8 +78,9 @@ class StatusLine:
         level = "n/a" if self.level is None else f"{self.level[0]} {self.level[1]}"
         wall = time.perf_counter() - self._wall0
         speed = f" | {t / wall:.1f}x" if wall > 0 else ""
+        dropped = sum(self.skipped.values())
         return (f"t {t:.1f} s | ladder {level}{self.place} | fixes {self.accepted}/"
-                f"{self.attempts} accepted | dropped {sum(self.skipped.values())}{speed}")  # fmt: skip
+                f"{self.attempts} accepted | dropped {dropped}{speed}")  # fmt: skip
 
     def close(self) -> None:
         """Remove the line (it is transient)."""
