@@ -38,6 +38,7 @@ __all__ = [
     "IMAGE_ENCODINGS",
     "MESSAGE_TYPES",
     "CameraInfoMsg",
+    "ElevatorStateMsg",
     "FrameTruth",
     "GroundTruthMsg",
     "ImageMsg",
@@ -325,10 +326,44 @@ class PointCloudMsg:
         return self.stamp_ns + round(float(self.time_offset_s.max()) * 1e9)
 
 
+@dataclass(frozen=True, slots=True, eq=False)
+class ElevatorStateMsg:
+    """What a building's elevator controller tells: one cab's door and where it stands.
+
+    Attributes
+    ----------
+    cab_frame : str
+        The cab's frame (``elevator_cab``; one frame per cab), whose state this is.
+    door_open : bool
+        The cab's door is open (at least half-way).
+    floor : str or None
+        The floor the cab stands at, None while it moves between floors.
+    """
+
+    stamp_ns: int
+    cab_frame: str
+    door_open: bool
+    floor: str | None = None
+
+    def __post_init__(self) -> None:
+        _set(self, "stamp_ns", _stamp(self))
+        _frame(self, "cab_frame")
+        if not isinstance(self.door_open, bool | np.bool_):
+            raise RecordError(
+                f"ElevatorStateMsg.door_open: expected a bool, got {_describe(self.door_open)}"
+            )
+        _set(self, "door_open", bool(self.door_open))
+        if self.floor is not None and (not isinstance(self.floor, str) or not self.floor):
+            raise RecordError(
+                "ElevatorStateMsg.floor: expected a floor name or None, got "
+                f"{_describe(self.floor)}"
+            )
+
+
 #: Any record of the stream.
 Message: TypeAlias = (
     OdometryMsg | ImageMsg | CameraInfoMsg | TagDetectionsMsg | TransformMsg
-    | PoseWithCovarianceMsg | GroundTruthMsg | PointCloudMsg
+    | PoseWithCovarianceMsg | GroundTruthMsg | PointCloudMsg | ElevatorStateMsg
 )  # fmt: skip
 MESSAGE_TYPES: tuple[type[Message], ...] = get_args(Message)
 
@@ -345,6 +380,8 @@ class NodeTopics:
     truth: str = "/ground_truth"
     tf: str = "/tf"
     lidar: str = "/lidar/points"
+    #: The building's elevator state (:class:`ElevatorStateMsg`), where it provides one.
+    elevator: str = "/elevator/state"
 
 
 @dataclass(frozen=True, slots=True)

@@ -1,7 +1,8 @@
 """``tagloc map``: check a tag map file, compare two (thin glue over :mod:`tagloc.tags.tagmap`).
 
 - ``tagloc map check tags.yaml`` prints ``tags.yaml: ok: <summary>`` (tags per family, tags per
-  frame, anchors), or one error line naming file, entry and field, and exits 1.
+  frame, anchors), or one error line naming file, entry and field, and exits 1; warnings about
+  floors (:mod:`tagloc.tags.tagmap_floors`) go to stderr.
 - ``tagloc map build --out tags.yaml ...`` builds a tag map from a survey; with lidar sweeps it
   also writes ``premap.ply`` (or ``.pcd``) and ``map.yaml`` + ``map.pgm`` beside it, all in
   ``map``, all or none (:func:`tagloc.io.survey_files.write_survey_outputs`).
@@ -50,10 +51,17 @@ MapFile = Annotated[Path, typer.Argument(help="Tag map YAML file.", show_default
 
 @map_app.command("check")
 def map_check(path: MapFile) -> None:
-    """Validate a tag map; print a one-line summary or one line naming the bad field."""
-    from tagloc.tags.tagmap import load_tag_map
+    """Validate a tag map; print a one-line summary or one line naming the bad field.
 
-    typer.echo(f"{path}: ok: {load_tag_map(path).summary()}")
+    Warnings about floors (a tag off its floor, a floor without tags) go to stderr, one line
+    each; they do not fail the check."""
+    from tagloc.tags.tagmap import load_tag_map
+    from tagloc.tags.tagmap_floors import floor_warnings
+
+    tag_map = load_tag_map(path)
+    for warning in floor_warnings(tag_map):
+        typer.echo(f"{path}: warning: {warning}", err=True)
+    typer.echo(f"{path}: ok: {tag_map.summary()}")
 
 
 @map_app.command("diff")

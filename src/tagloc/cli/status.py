@@ -3,6 +3,8 @@
 ``t 123.4 s | ladder 2 markers_carry | fixes 812/1303 accepted | dropped 3 | 4.1x``: the
 stream time since the first output, the ladder level, the fixes accepted of those attempted, the
 input the node dropped (its ``skipped`` counts, read live) and the speed against the wall clock.
+In a building of several floors or with elevators the status's floor and cab state follow the
+level: ``| floor 2`` in the map, ``| floor ? in_cab elevator_cab`` riding.
 Redrawn at most :data:`REFRESH_S` apart, on stderr, and only on a terminal (a pipe or a log file
 gets nothing); :meth:`StatusLine.close` removes it.
 """
@@ -43,6 +45,7 @@ class StatusLine:
         self.stamp_ns = 0
         self.level: tuple[int, str] | None = None
         self.attempts = self.accepted = 0
+        self.place = ""  # floor and cab, from the status
         self._wall0 = time.perf_counter()
         self._next = 0.0
         self._live = None
@@ -57,6 +60,7 @@ class StatusLine:
             self.stamp_ns = max(self.stamp_ns, stamp)
         if isinstance(output, StatusReport):
             self.level = (int(output.level), output.level.label)
+            self.place = _place(output)
         elif isinstance(output, LadderTransition):
             self.level = (int(output.to_level), output.to_level.label)
         elif isinstance(output, FixAttempt):
@@ -74,11 +78,20 @@ class StatusLine:
         level = "n/a" if self.level is None else f"{self.level[0]} {self.level[1]}"
         wall = time.perf_counter() - self._wall0
         speed = f" | {t / wall:.1f}x" if wall > 0 else ""
-        return (f"t {t:.1f} s | ladder {level} | fixes {self.accepted}/{self.attempts} accepted "
-                f"| dropped {sum(self.skipped.values())}{speed}")  # fmt: skip
+        dropped = sum(self.skipped.values())
+        return (f"t {t:.1f} s | ladder {level}{self.place} | fixes {self.accepted}/"
+                f"{self.attempts} accepted | dropped {dropped}{speed}")  # fmt: skip
 
     def close(self) -> None:
         """Remove the line (it is transient)."""
         if self._live is not None:
             self._live.stop()
             self._live = None
+
+
+def _place(status: StatusReport) -> str:
+    """`` | floor 2``, `` | floor ? in_cab elevator_cab`` (empty: no floors, no cab)."""
+    cab = "" if not status.cab.in_cab else f" {status.cab} {status.cab_frame}"
+    if status.floor is None and not cab:
+        return ""
+    return f" | floor {status.floor if status.floor is not None else '?'}{cab}"

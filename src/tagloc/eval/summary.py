@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from tagloc.eval.elevator import apply_ride_checks
 from tagloc.eval.fixstats import (
     AcceptanceBin,
     FixCounts,
@@ -248,7 +249,8 @@ def evaluate(run: LocalizationRun, config: EvalConfig | None = None) -> Evaluati
         checks=[],
         config=cfg,
     )
-    summary = dataclasses.replace(summary, checks=_checks(summary))
+    checks = apply_ride_checks(run, _checks(summary), Check)  # a run through elevator rides
+    summary = dataclasses.replace(summary, checks=checks)
     steps = ladder_steps(run) if run.ladder else None
     return Evaluation(
         summary=summary, trajectories=traj, errors=errors, jumps=jumps, ladder_steps=steps

@@ -40,8 +40,9 @@ __all__ = [
     "run_trajectories",
 ]
 
-#: Event kinds at which a correction snaps by design (excluded from the largest jump).
-SNAP_EVENT_KINDS = ("initialized", "reinitialized_kidnap")
+#: Event kinds at which a correction snaps by design (excluded from the largest jump): a
+#: (re)initialization, and a declared floor change (the correction moves by the floors' heights).
+SNAP_EVENT_KINDS = ("initialized", "reinitialized_kidnap", "floor_changed")
 
 
 @dataclass(frozen=True, slots=True, eq=False)

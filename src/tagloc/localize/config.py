@@ -3,8 +3,9 @@
 Sections: ``frames`` (names, the published edge), ``tags`` (detector, PnP mode, pixel noise, how
 fixes are formed), ``gates`` (one set for observations and fixes), ``process_noise``,
 ``calibration``, ``cap`` (per-update cap and speed limit), ``kidnap``, ``suspect``, ``filter``,
-``supervisor`` (health, ladder, status rate), ``output`` (publication rate) and ``lidar`` (the
-scan-to-premap fix source, :mod:`tagloc.localize.config_lidar`). The resolved
+``supervisor`` (health, ladder, status rate), ``output`` (publication rate), ``lidar`` (the
+scan-to-premap fix source, :mod:`tagloc.localize.config_lidar`) and ``elevators`` (the cab
+frames, the map <-> cab handoff and floors, :class:`~tagloc.supervise.ElevatorConfig`). The resolved
 configuration (every default written out) is saved with every run.
 
 Loaded like every tagloc file (:mod:`tagloc.config`): unknown keys, NaN and wrong types are one
@@ -37,7 +38,7 @@ from tagloc.fileutil import atomic_write_text
 from tagloc.frames import OdometryFrameConfig
 from tagloc.localize.config_lidar import LidarConfig
 from tagloc.localize.config_tags import FramesConfig, GatesConfig, TagSensorConfig
-from tagloc.supervise import SupervisorConfig
+from tagloc.supervise import ElevatorConfig, SupervisorConfig
 
 _Sigma = Annotated[float, Field(ge=0, le=1e3)]
 #: Standard deviations per axis ``[x, y, z, rx, ry, rz]``, each ``>= 0``.
@@ -196,6 +197,7 @@ class LocalizerConfig(StrictModel):
     supervisor: SupervisorConfig = SupervisorConfig()
     output: OutputConfig = OutputConfig()
     lidar: LidarConfig = LidarConfig()
+    elevators: ElevatorConfig = ElevatorConfig()
 
     @classmethod
     def from_yaml_text(cls, text: str, source: str = "<string>") -> LocalizerConfig:

@@ -18,7 +18,9 @@ Per-fix decisions (each fix gets exactly one on arrival; a fix buffered as
 Filter-level decisions (one event each): ``INITIALIZED`` (state created from ``k`` consistent
 fixes, or an explicit prior), ``REINITIALIZED_KIDNAP``, ``GAP`` (no accepted fix for too long:
 re-acquisition starts), ``CAPPED`` (the published correction was clipped; the remainder is
-carried), ``SUSPECT_SOURCE`` and ``SOURCE_CLEARED``.
+carried), ``SUSPECT_SOURCE`` and ``SOURCE_CLEARED``; and the node's ``FLOOR_CHANGED`` (the
+floor became known or changed: the one declared discontinuity of the published correction,
+exempt from the cap and the speed limit, :mod:`tagloc.localize.floors`).
 """
 
 from __future__ import annotations
@@ -50,6 +52,7 @@ class EventKind(StrEnum):
     CAPPED = "capped"
     SUSPECT_SOURCE = "suspect_source"
     SOURCE_CLEARED = "source_cleared"
+    FLOOR_CHANGED = "floor_changed"
 
 
 #: Decisions that apply a fix (accepted, or used to (re)initialize the state).
@@ -71,6 +74,7 @@ _INFO = {
     EventKind.REINITIALIZED_KIDNAP,
     EventKind.GAP,
     EventKind.SOURCE_CLEARED,
+    EventKind.FLOOR_CHANGED,
 }
 
 

@@ -18,6 +18,7 @@ from tagloc.geometry import SE3
 from tagloc.localize.config import LocalizerConfig
 from tagloc.localize.events import APPLIED, FilterEvent
 from tagloc.localize.filter import MapOdomFilter
+from tagloc.localize.floors import FloorFilter, FloorFrame
 
 __all__ = ["BUFFER_WINDOW_NS", "Fusion"]
 
@@ -33,10 +34,16 @@ class Fusion:
     config : LocalizerConfig
     on_event : callable
         Receives every event of the filter (of each filter :meth:`reset` builds).
+    floors : FloorFrame, optional
+        A building of several floors: the filter works in the current floor's frame
+        (:class:`~tagloc.localize.floors.FloorFilter`).
     """
 
-    def __init__(self, config: LocalizerConfig, on_event: Callable[[FilterEvent], None]) -> None:
-        self._config, self._on_event = config, on_event
+    def __init__(
+        self, config: LocalizerConfig, on_event: Callable[[FilterEvent], None],
+        floors: FloorFrame | None = None,
+    ) -> None:  # fmt: skip
+        self._config, self._on_event, self._floors = config, on_event, floors
         self._statics: dict[tuple[str, str], SE3] = {}
         self._changes = 0
         self._odom_cov: np.ndarray | None = None
@@ -83,7 +90,11 @@ class Fusion:
         buffer = TransformBuffer(window_ns=BUFFER_WINDOW_NS)
         for (parent, child), T in self._statics.items():
             buffer.set_static(parent, child, T)
-        flt = MapOdomFilter.from_config(self._config, buffer)
+        flt = (
+            MapOdomFilter.from_config(self._config, buffer)
+            if self._floors is None
+            else FloorFilter.build(self._config, buffer, self._floors)
+        )
         flt.events.listeners.append(self._event)
         return buffer, flt
 

@@ -46,6 +46,7 @@ import numpy as np
 
 from tagloc.camera import CameraModel
 from tagloc.geometry import SE3
+from tagloc.localize.cab import Elevators, check_cab_frames
 from tagloc.localize.config import LocalizerConfig
 from tagloc.localize.decisions import FixDecisions
 from tagloc.localize.estimate_output import EstimateOutput
@@ -122,14 +123,17 @@ class LocalizerNode:
     ) -> None:  # fmt: skip
         cfg = config or LocalizerConfig()
         self._config, self._topics, self._sinks = cfg, topics or NodeTopics(), tuple(sinks)
-        self._fusion = Fusion(cfg, self._on_event)
+        cabs, floors = check_cab_frames(tag_map, cfg), Elevators.floor_frame(tag_map, cfg)
+        self._fusion = Fusion(cfg, self._on_event, floors)
         inputs = SourceInputs(tag_map, self._topics, camera, T_base_cam, detector,
                               frame_truth or {}, premap, tuple(cameras))  # fmt: skip
         self._sources: tuple[FixSource, ...] = build_fix_sources(cfg, inputs)
         self._tags = next((s for s in self._sources if isinstance(s, TagSource)), None)
         self.supervisor = Supervisor(
-            cfg.supervisor, [s.spec for s in self._sources], cfg.gates.gap_s, cfg.gates.gap_m
+            cfg.supervisor, [s.spec for s in self._sources], cfg.gates.gap_s, cfg.gates.gap_m,
+            cfg.elevators if cabs or floors else None, None if floors is None else floors.heights_m,
         )
+        self._elevators = Elevators.build(tag_map, cfg, self.supervisor, floors, self._emit)
         self._queue = WorkQueue()
         self._skipped = SkipCounter()
         self._decisions = FixDecisions(cfg, self.supervisor, self._emit)
@@ -292,6 +296,9 @@ class LocalizerNode:
         """Predict to the sample, publish its estimate, step the supervisor."""
         self._fusion.filter.predict(stamp)
         estimate = self._estimates.estimate(self._fusion, stamp, T_odom_base)
+        if self._elevators is not None:  # the cab's estimate; the floor of this one
+            self._elevators.odometry(stamp, self._odometer_m, self._fusion.buffer)
+            estimate = self._elevators.estimate(estimate)
         self.latest_T_map_odom = estimate.T_map_odom if estimate.initialized else None
         self._emit(estimate)
         self._tick(stamp)
@@ -321,6 +328,11 @@ class LocalizerNode:
             self._decisions.apply(
                 self._sources, index, result, self._fusion.filter, self._odometer_m
             )
+            if self._elevators is not None and result.frame is not None:  # the cab's tags
+                self._elevators.frame(
+                    result.frame.stamp_ns, result.detections, self._fusion.buffer, self.camera,
+                    self.T_base_cam,
+                )
             for other in self._sources:
                 if other is not source:
                     other.observe(result)
@@ -336,6 +348,8 @@ class LocalizerNode:
         flt = self._fusion.filter
         since_s, since_m = self._decisions.since_last_fix(stamp, self._odometer_m)
         state = EstimatorState(flt.initialized, flt.reacquiring, since_s, since_m)
+        if self._elevators is not None:  # in a riding cab, the cab's estimate
+            state = self._elevators.estimator_state(state, stamp)
         move = self.supervisor.step(stamp, state, reason)
         if move is not None:
             self._emit(move)
@@ -362,6 +376,8 @@ class LocalizerNode:
             source.reset()
         self._decisions.reset()
         self._fusion.reset()
+        if self._elevators is not None:
+            self._elevators.reset()
         self._estimates.reset()
         self._start_over()
         self.supervisor.clock_jumped(stamp)
@@ -369,6 +385,8 @@ class LocalizerNode:
 
     # ----- output ----------------------------------------------------------------------------
     def _on_event(self, event: FilterEvent) -> None:
+        if self._elevators is not None:
+            self._elevators.filter_event(event)
         if event.kind is EventKind.DISCARDED_CANDIDATE:
             self._decisions.discarded(event.stamp_ns, event.source)
         if event.kind not in FIX_DECISIONS:  # a fix's decision leaves once, in its FixAttempt
@@ -403,4 +421,6 @@ class LocalizerNode:
         }  # fmt: skip
         for source in self._sources:
             out.update(source.metadata())
+        if self._elevators is not None:
+            out.update(self._elevators.metadata())
         return out

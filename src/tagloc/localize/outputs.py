@@ -15,6 +15,11 @@ Every output is one typed record, handed to each :class:`OutputSink` the moment 
   batch decision, start-up or re-acquisition, may still revise a fix within the consistency
   window; past it the record is final and is handed on).
 - :class:`~tagloc.messages.GroundTruthMsg`: ground truth, passed through when the stream has it.
+- In buildings with elevators (:mod:`tagloc.localize.cab`): :class:`~tagloc.localize.run.
+  CabEstimate` at each odometry sample in a cab (the ``<cab_frame> -> odom`` correction),
+  :class:`~tagloc.supervise.CabTransition` at each move of the map <-> cab handoff; the floor
+  rides on each :class:`Estimate` (``floor``) and a floor change is a ``floor_changed``
+  :class:`~tagloc.localize.events.FilterEvent`.
 
 :class:`RunRecorder` is the sink evaluation uses: it keeps everything in memory and assembles a
 :class:`~tagloc.localize.run.LocalizationRun` (a choice of that sink; the node keeps nothing).
@@ -31,11 +36,11 @@ from tagloc._types import FloatArray
 from tagloc.frames import TransformBuffer
 from tagloc.geometry import SE3
 from tagloc.localize.events import FilterEvent
-from tagloc.localize.run import CameraFrameRecord, FixAttempt, LocalizationRun
+from tagloc.localize.run import CabEstimate, CameraFrameRecord, FixAttempt, LocalizationRun
 from tagloc.messages import GroundTruthMsg
-from tagloc.supervise import LadderTransition, StatusReport
+from tagloc.supervise import CabTransition, LadderTransition, StatusReport
 
-__all__ = ["Estimate", "NodeOutput", "OutputSink", "RunRecorder"]
+__all__ = ["CabEstimate", "Estimate", "NodeOutput", "OutputSink", "RunRecorder"]
 
 _NAN6 = np.full((6, 6), np.nan)
 _NAN6.flags.writeable = False
@@ -57,6 +62,11 @@ class Estimate:
         On the configured publication rate.
     parent, child : str
         The published edge's frames (``map``/``odom``, or ``odom``/``map`` for the inverse).
+    T_map_odom_estimate : SE3 or None
+        The filter's estimate before the cap and the speed limit (None before initialization).
+    floor : str or None
+        The floor of ``T_map_base`` (None: unknown, riding a cab, or no floors; then, in a
+        building of several floors, its z variance is inflated).
     """
 
     stamp_ns: int
@@ -67,8 +77,8 @@ class Estimate:
     publish: bool
     parent: str
     child: str
-    #: The filter's estimate before the cap and the speed limit (None before initialization).
     T_map_odom_estimate: SE3 | None = None
+    floor: str | None = None
 
     @property
     def T_map_base(self) -> SE3:
@@ -82,7 +92,7 @@ class Estimate:
 
 NodeOutput: TypeAlias = (
     Estimate | FilterEvent | LadderTransition | StatusReport | FixAttempt | CameraFrameRecord
-    | GroundTruthMsg
+    | GroundTruthMsg | CabEstimate | CabTransition
 )  # fmt: skip
 
 
@@ -110,6 +120,9 @@ class RunRecorder:
         self.events: list[FilterEvent] = []
         self.ladder: list[LadderTransition] = []
         self.status: list[StatusReport] = []
+        self.cab: list[CabEstimate] = []
+        self.cab_moves: list[CabTransition] = []
+        self._floors: list[str | None] = []
 
     def write(self, output: NodeOutput) -> None:
         if isinstance(output, Estimate):
@@ -120,6 +133,7 @@ class RunRecorder:
             self._init.append(output.initialized)
             est = output.T_map_odom_estimate
             self._estimate.append(output.T_map_odom if est is None else est)
+            self._floors.append(output.floor)
         elif isinstance(output, FilterEvent):
             self.events.append(output)
         elif isinstance(output, FixAttempt):
@@ -132,6 +146,10 @@ class RunRecorder:
             self.status.append(output)
         elif isinstance(output, GroundTruthMsg):
             self._truth[output.stamp_ns] = output.T_frame_child
+        elif isinstance(output, CabEstimate):
+            self.cab.append(output)
+        elif isinstance(output, CabTransition):
+            self.cab_moves.append(output)
 
     def run(self, metadata: dict[str, Any]) -> LocalizationRun:
         """The recorded run (``metadata``: the node's :meth:`~LocalizerNode.metadata`)."""
@@ -143,6 +161,7 @@ class RunRecorder:
             fixes=list(self.fixes), frames=list(self.frames), events=list(self.events),
             metadata=metadata, ladder=list(self.ladder),
             T_map_odom_estimate=SE3.stack(self._estimate) if self._estimate else None,
+            cab=list(self.cab), cab_moves=list(self.cab_moves), floors=list(self._floors),
         )  # fmt: skip
 
     def _truth_at(self, stamps: np.ndarray) -> SE3 | None:

@@ -17,6 +17,9 @@ is in memory, stamped in integer nanoseconds, with frame names in the field name
 - ``kidnaps_ns``: stamps at which the scenario teleported the robot (empty if none).
 - ``ladder``: the supervisor's ladder transitions; ``T_map_odom_estimate``: the filter's own
   estimate at each row before the cap and the speed limit (None where not recorded).
+- ``cab``: the node's :class:`CabEstimate` s (the pose relative to an elevator cab, while in
+  one), ``cab_moves``: the map <-> cab handoff's transitions, ``floors``: the floor published
+  with each row (None: unknown, or a building without floors).
 """
 
 from __future__ import annotations
@@ -29,9 +32,38 @@ import numpy.typing as npt
 from tagloc._types import FloatArray
 from tagloc.geometry import SE3
 from tagloc.localize.events import APPLIED, FilterEvent
-from tagloc.supervise import LadderTransition
+from tagloc.supervise import CabState, CabTransition, LadderTransition
 
-__all__ = ["CameraFrameRecord", "FixAttempt", "LocalizationRun"]
+__all__ = ["CabEstimate", "CameraFrameRecord", "FixAttempt", "LocalizationRun"]
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class CabEstimate:
+    """The node's estimate relative to an elevator cab at one odometry sample (published while
+    the handoff is not ``in_map`` and the cab's estimate exists).
+
+    Attributes
+    ----------
+    stamp_ns : int
+    cab_frame : str
+    T_cab_odom : SE3
+        The published ``<cab_frame> -> odom`` correction (capped, as ``map -> odom`` is).
+    T_odom_base : SE3
+    cov_cab_base : (6, 6) float
+        Right-tangent covariance of ``T_cab_base``, ``[x, y, z, rx, ry, rz]``.
+    state : CabState
+    """
+
+    stamp_ns: int
+    cab_frame: str
+    T_cab_odom: SE3
+    T_odom_base: SE3
+    cov_cab_base: FloatArray
+    state: CabState
+
+    @property
+    def T_cab_base(self) -> SE3:
+        return self.T_cab_odom @ self.T_odom_base
 
 
 
@@ -149,6 +181,9 @@ class LocalizationRun:
     metadata: dict[str, object] = field(default_factory=dict)
     ladder: list[LadderTransition] = field(default_factory=list)
     T_map_odom_estimate: SE3 | None = None
+    cab: list[CabEstimate] = field(default_factory=list)
+    cab_moves: list[CabTransition] = field(default_factory=list)
+    floors: list[str | None] = field(default_factory=list)
 
     @property
     def T_map_base(self) -> SE3:

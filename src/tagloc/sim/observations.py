@@ -31,7 +31,7 @@ Example
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,7 +43,10 @@ from tagloc.camera import CameraModel
 from tagloc.config import StrictModel
 from tagloc.geometry import SE3
 from tagloc.sim.drive import Drive
-from tagloc.sim.world import World
+from tagloc.sim.floor_scene import SceneCache
+from tagloc.sim.people import people_xy
+from tagloc.sim.ride import RidePlan
+from tagloc.sim.world import Tag, Wall, World
 from tagloc.tags.detection import TagDetection, is_convex_clockwise, tag_object_points
 
 __all__ = [
@@ -146,13 +149,18 @@ class _WorldTags:
 
 def _world_tags(world: World) -> _WorldTags:
     poses = tuple(world.T_map_tag(tag) for tag in world.tags)
-    corners = [T.act(tag_object_points(tag.size)) for T, tag in zip(poses, world.tags, strict=True)]
-    walls = [w for w in world.walls_in_map() if w.material != "glass"]
+    return _tags_in(world.tags, poses, world.walls_in_map())
+
+
+def _tags_in(tags: Sequence[Tag], poses: Sequence[SE3], all_walls: Sequence[Wall]) -> _WorldTags:
+    """The arrays of ``tags`` at ``poses`` (``T_map_tag``) among ``all_walls``."""
+    corners = [T.act(tag_object_points(tag.size)) for T, tag in zip(poses, tags, strict=True)]
+    walls = [w for w in all_walls if w.material != "glass"]
     return _WorldTags(
-        ids=tuple(tag.id for tag in world.tags),
-        families=tuple(tag.family for tag in world.tags),
-        sizes=np.array([tag.size for tag in world.tags], dtype=float),
-        T_map_tag=poses,
+        ids=tuple(tag.id for tag in tags),
+        families=tuple(tag.family for tag in tags),
+        sizes=np.array([tag.size for tag in tags], dtype=float),
+        T_map_tag=tuple(poses),
         R=np.array([T.rotation.as_matrix() for T in poses]).reshape(-1, 3, 3),
         t=np.array([T.translation for T in poses], dtype=float).reshape(-1, 3),
         corners_map=np.array(corners, dtype=float).reshape(-1, 4, 3),
@@ -179,13 +187,29 @@ def _segments_blocked(
     return np.asarray(hit.any(axis=1))
 
 
+def _circles_block(origin: FloatArray, ends: FloatArray, circles: FloatArray) -> bool:
+    """Does any segment ``origin -> end`` pass through any circle ``[x, y, r]``?"""
+    if len(circles) == 0:
+        return False
+    d = ends - origin  # (M, 2)
+    rel = circles[None, :, :2] - origin  # (1, P, 2)
+    u = np.clip(np.einsum("mi,mpi->mp", d, rel) / np.maximum((d * d).sum(1), 1e-12)[:, None], 0, 1)
+    closest = origin + u[..., None] * d[:, None, :]
+    gap = np.linalg.norm(closest - circles[None, :, :2], axis=2)
+    return bool((gap < circles[None, :, 2]).any())
+
+
 def visible_tags(
     world_tags: _WorldTags,
     camera: CameraModel,
     T_map_cam: SE3,
     config: ObservationConfig,
+    occluders: FloatArray | None = None,
 ) -> list[tuple[int, SE3, FloatArray, float, float]]:
-    """Tags in view from ``T_map_cam``: ``(index, T_cam_tag, corners_px, range_m, angle_rad)``."""
+    """Tags in view from ``T_map_cam``: ``(index, T_cam_tag, corners_px, range_m, angle_rad)``.
+
+    ``occluders`` (P, 3) ``[x, y, radius]``: upright cylinders (people) that hide a tag when a
+    sight line passes through one (planar, as walls)."""
     if len(world_tags.ids) == 0:
         return []
     T_cam_map = T_map_cam.inverse()
@@ -215,6 +239,8 @@ def visible_tags(
         ends = np.vstack([world_tags.corners_map[i], world_tags.t[i][None, :]])
         ends = ends + _WALL_CLEARANCE_M * normal[None, :]
         if _segments_blocked(cam_in_map[:2], ends[:, :2], world_tags.opaque).any():
+            continue
+        if occluders is not None and _circles_block(cam_in_map[:2], ends[:, :2], occluders):
             continue
         T_cam_tag = T_cam_map @ world_tags.T_map_tag[i]
         angle = math.acos(min(1.0, float(cos_view[i])))
@@ -249,7 +275,45 @@ def simulate_observations(
     camera = camera_model if camera_model is not None else world.robot.camera.camera_model()
     stamps = drive.camera_stamps_ns if stamps_ns is None else np.asarray(stamps_ns, np.int64)
     T_base_cam = world.robot.camera.T_base_cam.T_base_cam()
+    if isinstance(drive.plan, RidePlan):
+        return _floor_frames(drive, world, camera, config, stamps, T_base_cam)
     return _frames(drive, _world_tags(world), camera, config, stamps, T_base_cam)
+
+
+def _floor_frames(
+    drive: Drive,
+    world: World,
+    camera: CameraModel,
+    config: ObservationConfig,
+    stamps: npt.NDArray[np.int64],
+    T_base_cam: SE3,
+) -> Iterator[ObservedFrame]:
+    """:func:`_frames` in a building: each frame sees the scene of its instant
+    (:mod:`tagloc.sim.floor_scene`), people included."""
+    assert isinstance(drive.plan, RidePlan)
+    scenes = SceneCache(world, drive.plan)
+    arrays: dict[tuple[object, ...], _WorldTags] = {}
+    for start in range(0, len(stamps), _CHUNK):
+        chunk = stamps[start : start + _CHUNK]
+        truth = drive.ground_truth_at(chunk)
+        route_s = drive.route_s(chunk)
+        for k, stamp in enumerate(chunk):
+            scene = scenes.at(float(route_s[k]), truth.xy_yaw_map_base[k, :2])
+            tags = arrays.get(scene.key) if scene.floor is not None else None
+            if tags is None:
+                tags = _tags_in([t for t, _ in scene.tags], [T for _, T in scene.tags],
+                                scene.walls)  # fmt: skip
+                if scene.floor is not None:
+                    arrays[scene.key] = tags
+            occluders = None
+            if scene.people:
+                xy = people_xy([p.waypoints() for p in scene.people], route_s[k : k + 1])[0]
+                radius = np.array([p.radius_m for p in scene.people])
+                occluders = np.column_stack([xy, radius])
+            T_map_base = truth.T_map_base[k]
+            T_map_cam = T_map_base @ T_base_cam
+            rng = np.random.default_rng(np.random.SeedSequence([config.seed, int(stamp) % 2**63]))
+            yield _frame(int(stamp), tags, camera, config, T_map_base, T_map_cam, rng, occluders)
 
 
 def _frames(
@@ -278,10 +342,12 @@ def _frame(
     T_map_base: SE3,
     T_map_cam: SE3,
     rng: np.random.Generator,
+    occluders: FloatArray | None = None,
 ) -> ObservedFrame:
     detections: list[TagDetection] = []
     sightings: list[TagSighting] = []
-    for i, T_cam_tag, corners, range_m, angle in visible_tags(tags, camera, T_map_cam, config):
+    seen = visible_tags(tags, camera, T_map_cam, config, occluders)
+    for i, T_cam_tag, corners, range_m, angle in seen:
         detected = bool(rng.random() < config.detection_probability)
         noisy = corners + rng.normal(0.0, config.pixel_sigma_px, size=(4, 2))
         if detected:

@@ -31,6 +31,7 @@ from pydantic import Field
 from tagloc._types import FloatArray
 from tagloc.config import StrictModel
 from tagloc.geometry import SE3
+from tagloc.sim.odometry_ride import ImuFusionConfig
 from tagloc.sim.trajectory import se3_from_xy_yaw
 
 
@@ -44,6 +45,9 @@ class _DriftConfig(StrictModel):
     sigma_xy_per_sqrt_m: float = Field(default=0.005, ge=0.0, le=1.0)
     sigma_yaw_deg_per_sqrt_m: float = Field(default=0.1, ge=0.0, le=20.0)
     sigma_yaw_deg_per_sqrt_rad: float = Field(default=0.3, ge=0.0, le=20.0)
+    #: An IMU fused into the odometry: what it makes of an elevator ride
+    #: (:mod:`tagloc.sim.odometry_ride`); None: the kinematics alone (no motion in a ride).
+    imu: ImuFusionConfig | None = None
 
 
 class WheelOdometryConfig(_DriftConfig):

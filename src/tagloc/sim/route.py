@@ -13,7 +13,7 @@ import numpy as np
 from pydantic import BeforeValidator, Field, model_validator
 
 from tagloc._types import FloatArray
-from tagloc.config import StrictModel, short_repr
+from tagloc.config import FieldPathError, StrictModel, short_repr
 
 #: Largest coordinate of a world, metres (a building, not a planet).
 MAX_COORDINATE_M = 1e5
@@ -43,16 +43,34 @@ def _check_target(value: Any) -> Any:
     )
 
 
-class Waypoint(StrictModel):
-    """A route waypoint: ``at`` (checkpoint name or ``[x, y]`` in map), optional ``dwell`` (s)."""
+class Ride(StrictModel):
+    """Ride ``elevator`` (a shaft's name) to floor ``to`` (:mod:`tagloc.sim.ride`)."""
 
-    at: Annotated[str | tuple[float, float], BeforeValidator(_check_target)]
+    elevator: str = Field(min_length=1, max_length=64)
+    to: str = Field(min_length=1, max_length=64)
+
+
+class Waypoint(StrictModel):
+    """A route waypoint: ``at`` (checkpoint name or ``[x, y]`` in map), optional ``dwell`` (s);
+    or ``ride: {elevator, to}``: walk into the cab from the current floor, ride it to floor
+    ``to``, walk out (multi-floor worlds; :mod:`tagloc.sim.ride`)."""
+
+    at: Annotated[str | tuple[float, float], BeforeValidator(_check_target)] | None = None
     dwell: float | None = Field(default=None, ge=0.0, le=MAX_DWELL_S)
+    ride: Ride | None = None
 
     @model_validator(mode="before")
     @classmethod
     def _bare(cls, data: Any) -> Any:
         return data if isinstance(data, dict) else {"at": data}
+
+    @model_validator(mode="after")
+    def _one(self) -> Waypoint:
+        if (self.at is None) == (self.ride is None):
+            raise ValueError("give exactly one of 'at' or 'ride'")
+        if self.ride is not None and self.dwell is not None:
+            raise FieldPathError(("dwell",), "a ride's dwell is its elevator's dwell_s")
+        return self
 
 
 class RouteConfig(StrictModel):
@@ -77,7 +95,11 @@ def route_points(
     ------
     KeyError
         A waypoint names a checkpoint missing from ``checkpoints_xy`` (the world validates this).
+    ValueError
+        A ride waypoint (those routes are planned by :mod:`tagloc.sim.ride`).
     """
+    if any(w.at is None for w in route.waypoints):
+        raise ValueError("a route that rides an elevator is planned by tagloc.sim.ride")
     xy = [checkpoints_xy[w.at] if isinstance(w.at, str) else w.at for w in route.waypoints]
     dwell = [route.dwell if w.dwell is None else w.dwell for w in route.waypoints]
     return np.array(xy * route.repeat, dtype=np.float64), np.array(dwell * route.repeat)

@@ -12,7 +12,7 @@ takes 70 000 odometry samples and 21 000 camera frames.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 
 from tagloc.config import FieldPathError
 from tagloc.sim.route import RouteConfig
@@ -31,6 +31,7 @@ def check_route_budget(
     checkpoints_xy: Mapping[str, tuple[float, float]],
     odom_rate_hz: float,
     camera_rate_hz: float,
+    plan: Callable[[], RoutePlan] | None = None,
 ) -> RoutePlan:
     """Plan ``route`` and check that driving it stays within the limits above.
 
@@ -42,6 +43,9 @@ def check_route_budget(
         Every checkpoint the route names, map frame, metres.
     odom_rate_hz, camera_rate_hz : float
         Sampling rates of the drive.
+    plan : callable, optional
+        Plans the route instead of :func:`~tagloc.sim.trajectory.plan_from_config` (a route
+        that rides elevators).
 
     Returns
     -------
@@ -61,13 +65,13 @@ def check_route_budget(
             f"{MAX_ROUTE_WAYPOINTS}",
         )
     try:
-        plan = plan_from_config(route, checkpoints_xy)
+        planned = plan() if plan is not None else plan_from_config(route, checkpoints_xy)
     except ValueError:
         raise FieldPathError(
             ("route", "waypoints"),
             "the route needs at least two distinct waypoints (consecutive repeats are merged)",
         ) from None
-    duration_s = plan.total_duration_s
+    duration_s = planned.total_duration_s
     for samples, limit, what in (
         (duration_s * odom_rate_hz, MAX_ODOM_SAMPLES, "odometry samples at robot.odom_rate_hz"),
         (duration_s * camera_rate_hz, MAX_CAMERA_FRAMES, "camera frames at robot.camera.rate_hz"),
@@ -75,11 +79,11 @@ def check_route_budget(
         if not samples <= limit:  # also NaN
             raise FieldPathError(
                 ("route",),
-                f"driving the route ({plan.length_m:.0f} m, repeat {route.repeat}) takes "
+                f"driving the route ({planned.length_m:.0f} m, repeat {route.repeat}) takes "
                 f"{duration_s:.0f} s, {_count(samples)} {what}, more than {limit}; raise the "
                 "speed or accelerations, shorten the dwells or the route",
             )
-    return plan
+    return planned
 
 
 def _count(samples: float) -> str:

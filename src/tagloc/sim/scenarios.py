@@ -46,6 +46,7 @@ from tagloc.errors import SimulationError
 from tagloc.geometry import SE3
 from tagloc.messages import (
     CameraInfoMsg,
+    ElevatorStateMsg,
     FrameTruth,
     GroundTruthMsg,
     Message,
@@ -56,10 +57,14 @@ from tagloc.messages import (
     TransformMsg,
 )
 from tagloc.sim.drive import Drive, simulate_drive
+from tagloc.sim.elevator_stream import elevator_messages
 from tagloc.sim.faults import ClockJump, DropMessages, DuplicateMessages, StreamFault, apply_faults
 from tagloc.sim.lidar import LIDAR_FRAME, LidarSimulator, Sweep, premap_from_world
+from tagloc.sim.lidar_floors import lidar_for_drive
 from tagloc.sim.observations import ObservationConfig, simulate_observations
+from tagloc.sim.odometry_ride import ImuFusionConfig
 from tagloc.sim.people import Person, crowd_around
+from tagloc.sim.ride_schedule import pacing_passengers, random_ride_route
 from tagloc.sim.trajectory import Trajectory
 from tagloc.sim.world import WallMount, World, load_builtin_world, load_default_world
 from tagloc.tags.tagmap import TagEntry, TagMap
@@ -101,6 +106,14 @@ class ScenarioSpec:
     world: str | None = None
     #: People walking with the robot, hiding about this fraction of the lidar's beams.
     crowd_fraction: float | None = None
+    #: A building's route replaced by this many rides to random floors (seeded by the seed).
+    rides: int | None = None
+    #: People pacing in the cab (hiding its back-wall tag part of the time).
+    passengers: int = 0
+    #: The building publishes its elevators' state (``ElevatorStateMsg`` on ``topics.elevator``).
+    elevator_topic: bool = False
+    #: The robot's odometry fuses an IMU (:mod:`tagloc.sim.odometry_ride`).
+    odometry_imu: bool = False
 
 
 SCENARIOS: dict[str, ScenarioSpec] = {
@@ -178,6 +191,23 @@ SCENARIOS: dict[str, ScenarioSpec] = {
         "which fix the position across the corridor and the heading, not along it",
         world="long_corridor",
     ),
+    # a building of floors (world tower): floors 0, 1, 2 at 0, 3.5, 7 m, one mirrored cab
+    "elevator": ScenarioSpec(
+        "20 rides of the tower's mirrored lift to random floors (a seeded schedule): the doors "
+        "open and close, two passengers pacing in the cab hide its tag part of the time, the "
+        "building publishes the lift's door and floor; legged odometry (no motion in a ride)",
+        world="tower", rides=20, passengers=2, elevator_topic=True,
+    ),
+    "elevator_imu": ScenarioSpec(
+        "the elevator scenario with IMU-fused odometry: each trip gives the odometry a z drift "
+        "and a tilt transient",
+        world="tower", rides=20, passengers=2, elevator_topic=True, odometry_imu=True,
+    ),
+    "kidnap_floor": ScenarioSpec(
+        "robot carried 140 s further along the tower's route at t = 70 s (odometry unaware): "
+        "from floor 2 to the same spot of floor 0, which looks the same; only the tags tell",
+        world="tower", kidnap_at_s=70.0, kidnap_skip_s=140.0,
+    ),
 }
 
 
@@ -193,6 +223,12 @@ class SplicedDrive(Drive):
         stamps = np.asarray(stamps_ns, dtype=np.int64)
         shifted = np.where(stamps >= self.kidnap_ns, stamps + self.skip_ns, stamps)
         return self.plan.sample(shifted, self.t0_ns)
+
+    def route_s(self, stamps_ns: npt.ArrayLike) -> npt.NDArray[np.float64]:
+        """Route time at ``stamps_ns``, shifted by ``skip_ns`` from the kidnap on."""
+        stamps = np.atleast_1d(np.asarray(stamps_ns, dtype=np.int64))
+        shifted = np.where(stamps >= self.kidnap_ns, stamps + self.skip_ns, stamps)
+        return (shifted - np.int64(self.t0_ns)).astype(np.float64) * 1e-9
 
 
 @dataclass(frozen=True, slots=True)
@@ -226,15 +262,36 @@ class Scenario:
     faults: tuple[StreamFault, ...] = ()
     #: Lidar occluders: the world's people and the scenario's crowd.
     people: tuple[Person, ...] = ()
+    #: The building publishes its elevators' state (:func:`~tagloc.sim.elevator_stream.
+    #: elevator_messages`, on ``topics.elevator``).
+    elevator_topic: bool = False
 
 
 def tag_map_from_world(world: World) -> TagMap:
-    """The surveyed tag map of ``world``: every tag's pose in ``map`` (cab tags included, the
-    cab standing still)."""
-    return TagMap.from_entries(
-        TagEntry.from_pose(t.id, world.T_map_tag(t), t.size, family=t.family, note=t.note or "")
-        for t in world.tags
-    )
+    """The surveyed tag map of ``world``. A single-floor world: every tag's pose in ``map`` (cab
+    tags included, the cab standing still). A world with floors: each floor's tags in ``map`` (z
+    above that floor's height) with their ``floor``, each cab's tags in its cab's frame (listed in
+    ``frames``), and the ``floors`` table."""
+    if not world.has_floors:
+        return TagMap.from_entries(
+            TagEntry.from_pose(t.id, world.T_map_tag(t), t.size, family=t.family,
+                               note=t.note or "")
+            for t in world.tags
+        )  # fmt: skip
+    entries = [
+        TagEntry.from_pose(
+            t.id,
+            world.T_map_tag(t) if floor is not None else t.T_frame_tag(),
+            t.size,
+            family=t.family,
+            note=t.note or "",
+            frame=t.frame,
+            floor=floor,
+        )
+        for t, floor in world.all_tags()
+    ]
+    frames = ["map", *(s.frame for s in world.shafts())]
+    return TagMap.from_entries(entries, frames=frames, floors=world.floor_heights())
 
 
 def scenario_premap(
@@ -289,6 +346,7 @@ def build_scenario(
             f"the duration must be a positive number of seconds, got {duration_s}"
         )
     base = world or (load_builtin_world(spec.world) if spec.world else load_default_world())
+    base = _building(base, spec, seed)
     surveyed = base.model_copy(
         update={"tags": tuple(t for t in base.tags if t.id not in spec.remove_tags)}
     )
@@ -312,8 +370,28 @@ def build_scenario(
     if spec.crowd_fraction is not None:
         people = (*people, *_crowd(drive, spec.crowd_fraction, seed))
     return Scenario(
-        name, drive, obs, true_world, tag_map, stamps, kidnaps, spec.faults, tuple(people)
-    )
+        name, drive, obs, true_world, tag_map, stamps, kidnaps, spec.faults, tuple(people),
+        spec.elevator_topic,
+    )  # fmt: skip
+
+
+def _building(world: World, spec: ScenarioSpec, seed: int) -> World:
+    """The scenario's changes to a building: a seeded schedule of rides, passengers in the
+    first cab, an IMU in the odometry."""
+    update: dict[str, object] = {}
+    if spec.rides is not None and world.elevators:
+        update["route"] = random_ride_route(world, spec.rides, seed)
+    if spec.odometry_imu:
+        odometry = world.robot.odometry.model_copy(update={"imu": ImuFusionConfig()})
+        update["robot"] = world.robot.model_copy(update={"odometry": odometry})
+    if not update and not spec.passengers:
+        return world
+    world = world.model_copy(update=update)
+    if spec.passengers and world.elevators:
+        duration = world.plan_route().total_duration_s
+        riders = pacing_passengers(world.elevators[0], duration, spec.passengers)
+        world = world.model_copy(update={"people": (*world.people, *riders)})
+    return world
 
 
 def _crowd(drive: Drive, fraction: float, seed: int) -> tuple[Person, ...]:
@@ -413,9 +491,7 @@ class ScenarioSource:
         self.T_base_cam = robot.camera.T_base_cam.T_base_cam()
         self.lidar: LidarSimulator | None = None
         if robot.lidar is not None and lidar:
-            self.lidar = LidarSimulator(
-                robot.lidar, scenario.world.walls_in_map(), scenario.people, drive.t0_ns
-            )
+            self.lidar = lidar_for_drive(robot.lidar, scenario.world, scenario.people, drive)
 
     @property
     def topics(self) -> dict[str, type[Message]]:
@@ -427,6 +503,8 @@ class ScenarioSource:
         }  # fmt: skip
         if self.lidar is not None:
             topics[t.lidar] = PointCloudMsg
+        if self.scenario.elevator_topic:
+            topics[t.elevator] = ElevatorStateMsg
         return topics
 
     def __iter__(self) -> Iterator[tuple[str, Message]]:
@@ -447,7 +525,12 @@ class ScenarioSource:
         sweep = next(sweeps, None)
         frames = iter(self.frames)
         frame = next(frames, None)
+        building = iter(elevator_messages(drive) if self.scenario.elevator_topic else ())
+        state = next(building, None)
         for i, stamp in enumerate(drive.stamps_ns.tolist()):
+            while state is not None and state.stamp_ns <= stamp:  # the building's elevators
+                yield t.elevator, state
+                state = next(building, None)
             # frames arrive at their stamp, sweeps when complete, before the odometry of a stamp
             while True:
                 t_frame = frame.stamp_ns if frame is not None else stamp + 1

@@ -13,212 +13,53 @@ wall); ``size`` is the black-border edge in metres.
 
 from __future__ import annotations
 
-import math
 import os
 from importlib import resources
-from typing import Annotated, Literal
+from typing import Literal
 
 import numpy as np
 import yaml
-from pydantic import Field, field_validator, model_validator
+from pydantic import Field, model_validator
 
 from tagloc.config import (
     FieldPathError,
     StrictModel,
-    check_unit_quat,
     parse_yaml_mapping,
     read_text_file,
     short_repr,
     validate,
 )
 from tagloc.errors import SimulationError
-from tagloc.geometry import SE3, SO3
+from tagloc.geometry import SE3
+from tagloc.sim.building import cab_walls, check_building, check_legacy, implicit_floor
+from tagloc.sim.floors import DEFAULT_CAB_FRAME, Floor, Shaft
 from tagloc.sim.odometry import ODOMETRY_MODELS
 from tagloc.sim.people import Person
+from tagloc.sim.ride import plan_rides
 from tagloc.sim.robot import Robot
-from tagloc.sim.route import MAX_COORDINATE_M, RouteConfig
+from tagloc.sim.route import RouteConfig
 from tagloc.sim.route_budget import check_route_budget
+from tagloc.sim.trajectory import RoutePlan, plan_from_config
+from tagloc.sim.world_parts import (
+    TAG_FAMILY_SIZES,
+    Checkpoint,
+    Coordinate,
+    Elevator,
+    PlanarPose,
+    Tag,
+    TagFamily,
+    TagPose,
+    Vec2,
+    Vec3,
+    Wall,
+    WallMount,
+)
 
-#: A coordinate in ``map`` or ``elevator_cab``, metres (a building, not a planet).
-Coordinate = Annotated[float, Field(ge=-MAX_COORDINATE_M, le=MAX_COORDINATE_M)]
-Vec2 = tuple[Coordinate, Coordinate]
-Vec3 = tuple[Coordinate, Coordinate, Coordinate]
-#: Codes per AprilTag family: valid ids are ``0 .. n - 1``.
-TAG_FAMILY_SIZES = {
-    "tag36h11": 587,
-    "tag25h9": 35,
-    "tag16h5": 30,
-    "tagCircle21h7": 38,
-    "tagCircle49h12": 65535,
-    "tagStandard41h12": 2115,
-    "tagStandard52h13": 48714,
-    "tagCustom48h12": 42211,
-}
-TagFamily = Literal[
-    "tag36h11",
-    "tag25h9",
-    "tag16h5",
-    "tagCircle21h7",
-    "tagCircle49h12",
-    "tagStandard41h12",
-    "tagStandard52h13",
-    "tagCustom48h12",
-]
-
-
-def _yaw_matrix(yaw: float) -> np.ndarray:
-    c, s = math.cos(yaw), math.sin(yaw)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-class Wall(StrictModel):
-    """A vertical wall: the segment ``start -> end`` on the floor (m), ``height`` (m)."""
-
-    start: Vec2
-    end: Vec2
-    material: Literal["wall", "glass", "mirror"] = "wall"
-    height: float = Field(default=2.5, gt=0.0, le=20.0)
-
-    @model_validator(mode="after")
-    def _not_degenerate(self) -> Wall:
-        if math.dist(self.start, self.end) < 1e-6:
-            raise FieldPathError(("end",), "wall has zero length (end == start)")
-        return self
-
-
-class TagPose(StrictModel):
-    """Full pose of a tag in its frame: ``position`` (m) and unit ``quat_xyzw``."""
-
-    position: Vec3
-    quat_xyzw: tuple[float, float, float, float]
-
-    @field_validator("quat_xyzw")
-    @classmethod
-    def _check_quat(
-        cls, value: tuple[float, float, float, float]
-    ) -> tuple[float, float, float, float]:
-        return check_unit_quat(value)
-
-
-class WallMount(StrictModel):
-    """Upright tag on a wall: centre ``(x, y, height)``, horizontal face normal at ``yaw_deg``."""
-
-    x: Coordinate
-    y: Coordinate
-    yaw_deg: float = Field(ge=-360.0, le=360.0)
-    height: float = Field(gt=0.0, le=20.0)
-
-
-class Tag(StrictModel):
-    """One tag: exactly one of ``pose`` or ``wall``, in ``frame`` (``map`` or ``elevator_cab``)."""
-
-    id: int = Field(ge=0)
-    family: TagFamily = "tag36h11"
-    size: float = Field(gt=0.0, le=5.0)
-    pose: TagPose | None = None
-    wall: WallMount | None = None
-    frame: Literal["map", "elevator_cab"] = "map"
-    note: str | None = None
-
-    @model_validator(mode="after")
-    def _check(self) -> Tag:
-        if (self.pose is None) == (self.wall is None):
-            raise ValueError("give exactly one of 'pose' or 'wall'")
-        if self.id >= TAG_FAMILY_SIZES[self.family]:
-            raise FieldPathError(
-                ("id",),
-                f"id {self.id} is out of range for {self.family} "
-                f"(0..{TAG_FAMILY_SIZES[self.family] - 1})",
-            )
-        return self
-
-    def T_frame_tag(self) -> SE3:
-        """Pose of the tag in its own ``frame`` (``map`` or ``elevator_cab``).
-
-        For ``wall: {x, y, yaw_deg, height}`` the tag axes in the frame are
-        ``z = (cos yaw, sin yaw, 0)`` (face normal), ``y = (0, 0, 1)`` (up),
-        ``x = y cross z = (-sin yaw, cos yaw, 0)`` (right as seen by a viewer facing the tag).
-        """
-        if self.pose is not None:
-            return SE3.from_quat(self.pose.quat_xyzw, self.pose.position)
-        assert self.wall is not None
-        c, s = math.cos(math.radians(self.wall.yaw_deg)), math.sin(math.radians(self.wall.yaw_deg))
-        R_frame_tag = np.array([[-s, 0.0, c], [c, 0.0, s], [0.0, 1.0, 0.0]])
-        return SE3(
-            rotation=SO3.from_matrix(R_frame_tag),
-            translation=np.array([self.wall.x, self.wall.y, self.wall.height]),
-        )
-
-
-class PlanarPose(StrictModel):
-    """``x``, ``y`` (m) and ``yaw_deg`` of a frame in ``map`` (z = 0, level)."""
-
-    x: Coordinate
-    y: Coordinate
-    yaw_deg: float = Field(default=0.0, ge=-360.0, le=360.0)
-
-
-class Elevator(StrictModel):
-    """The elevator cab: a rectangular room with its own frame ``elevator_cab``.
-
-    ``footprint`` is ``[size_x, size_y]`` (m), centred on the cab frame origin; the door is an
-    opening of ``door_width`` centred on the side ``door_side`` of the rectangle.
-    """
-
-    pose_in_map: PlanarPose
-    footprint: tuple[float, float]
-    door_side: Literal["+x", "-x", "+y", "-y"] = "+x"
-    door_width: float = Field(default=1.0, gt=0.0)
-    height: float = Field(default=2.3, gt=0.0, le=20.0)
-    wall_material: Literal["wall", "glass", "mirror"] = "wall"
-
-    @model_validator(mode="after")
-    def _check(self) -> Elevator:
-        if min(self.footprint) <= 0 or max(self.footprint) > 100.0:
-            raise FieldPathError(("footprint",), "sizes must be > 0 and <= 100 m")
-        along = self.footprint[1] if self.door_side[1] == "x" else self.footprint[0]
-        if self.door_width >= along:
-            raise FieldPathError(
-                ("door_width",),
-                f"{self.door_width} m does not fit the {along} m side {self.door_side}",
-            )
-        return self
-
-    def T_map_cab(self) -> SE3:
-        """Pose of the ``elevator_cab`` frame in ``map``."""
-        return SE3(
-            rotation=SO3.from_matrix(_yaw_matrix(math.radians(self.pose_in_map.yaw_deg))),
-            translation=np.array([self.pose_in_map.x, self.pose_in_map.y, 0.0]),
-        )
-
-    def walls_cab(self) -> list[tuple[Vec2, Vec2]]:
-        """The cab's wall segments in ``elevator_cab`` (the door side split around the door)."""
-        hx, hy, hd = self.footprint[0] / 2, self.footprint[1] / 2, self.door_width / 2
-        sides = {
-            "+x": ((hx, -hy), (hx, hy)),
-            "-x": ((-hx, hy), (-hx, -hy)),
-            "+y": ((hx, hy), (-hx, hy)),
-            "-y": ((-hx, -hy), (hx, -hy)),
-        }
-        segments: list[tuple[Vec2, Vec2]] = []
-        for side, (a, b) in sides.items():
-            if side != self.door_side:
-                segments.append((a, b))
-                continue
-            mid = ((a[0] + b[0]) / 2, (a[1] + b[1]) / 2)
-            u = ((b[0] - a[0]) / math.dist(a, b), (b[1] - a[1]) / math.dist(a, b))
-            segments.append((a, (mid[0] - hd * u[0], mid[1] - hd * u[1])))
-            segments.append(((mid[0] + hd * u[0], mid[1] + hd * u[1]), b))
-        return segments
-
-
-class Checkpoint(StrictModel):
-    """A named floor position (m) in ``map``."""
-
-    name: str = Field(min_length=1, max_length=200, pattern=r"^[A-Za-z0-9_.-]+$")
-    x: Coordinate
-    y: Coordinate
-    note: str | None = None
+__all__ = [
+    "BUILTIN_WORLDS", "TAG_FAMILY_SIZES", "Checkpoint", "Coordinate", "Elevator", "Floor",
+    "PlanarPose", "Shaft", "Tag", "TagFamily", "TagPose", "Vec2", "Vec3", "Wall", "WallMount",
+    "World", "load_builtin_world", "load_default_world", "load_world",
+]  # fmt: skip
 
 
 class World(StrictModel):
@@ -230,6 +71,10 @@ class World(StrictModel):
     tags: tuple[Tag, ...] = ()
     elevator: Elevator | None = None
     checkpoints: tuple[Checkpoint, ...] = ()
+    #: Storeys (:mod:`tagloc.sim.floors`); none: the top-level walls, tags, checkpoints are one.
+    floors: tuple[Floor, ...] = ()
+    #: Elevator shafts whose cabs move between floors (:mod:`tagloc.sim.floors`).
+    elevators: tuple[Shaft, ...] = ()
     route: RouteConfig
     robot: Robot
     #: People walking about (lidar occluders only; :mod:`tagloc.sim.people`).
@@ -237,37 +82,24 @@ class World(StrictModel):
 
     @model_validator(mode="after")
     def _cross_references(self) -> World:
-        seen: dict[tuple[str, int], int] = {}
-        for j, tag in enumerate(self.tags):
-            if (tag.family, tag.id) in seen:
-                raise FieldPathError(
-                    ("tags", j, "id"),
-                    f"duplicate tag id {tag.id} (also tags[{seen[tag.family, tag.id]}])",
-                )
-            seen[tag.family, tag.id] = j
-            if tag.frame == "elevator_cab":
-                if self.elevator is None:
-                    raise FieldPathError(
-                        ("tags", j, "frame"),
-                        "tag is in frame elevator_cab but the world has no elevator",
-                    )
-                xyz = tag.T_frame_tag().translation
-                if np.any(np.abs(xyz[:2]) > np.array(self.elevator.footprint) / 2 + 0.05):
-                    raise FieldPathError(("tags", j), "tag lies outside the elevator cab footprint")
-        names: dict[str, int] = {}
-        for j, cp in enumerate(self.checkpoints):
-            if cp.name in names:
-                raise FieldPathError(
-                    ("checkpoints", j, "name"),
-                    f"duplicate checkpoint {cp.name!r} (also checkpoints[{names[cp.name]}])",
-                )
-            names[cp.name] = j
+        if self.has_floors:
+            check_building(self.all_floors(), self.elevators, self.tags, self.elevator)
+            if self.walls or self.checkpoints:
+                field = "walls" if self.walls else "checkpoints"
+                raise FieldPathError((field,), "with floors, walls and checkpoints go in a floor")
+        else:
+            check_legacy(self.tags, self.checkpoints, self.elevator)
+        names = self.checkpoints_xy()
         for j, wp in enumerate(self.route.waypoints):
             if isinstance(wp.at, str) and wp.at not in names:
                 known = ", ".join(list(names)[:12]) + (", ..." if len(names) > 12 else "")
                 raise FieldPathError(
                     ("route", "waypoints", j),
                     f"unknown checkpoint {short_repr(wp.at)} (known: {known or 'none'})",
+                )
+            if wp.ride is not None and not self.elevators:
+                raise FieldPathError(
+                    ("route", "waypoints", j, "ride"), "the world has no elevators to ride"
                 )
         return self
 
@@ -276,44 +108,104 @@ class World(StrictModel):
         """Every later command drives the route: refuse one that cannot be driven affordably."""
         robot = self.robot
         check_route_budget(
-            self.route, self.checkpoints_xy(), robot.odom_rate_hz, robot.camera.rate_hz
-        )
+            self.route, self.checkpoints_xy(), robot.odom_rate_hz, robot.camera.rate_hz,
+            plan=self.plan_route if self.has_floors else None,
+        )  # fmt: skip
         return self
 
+    @property
+    def has_floors(self) -> bool:
+        """Whether the world is a building of floors and shafts (``floors`` or ``elevators``)."""
+        return bool(self.floors or self.elevators)
+
+    def all_floors(self) -> tuple[Floor, ...]:
+        """The floors; for a world file without ``floors``, one named ``"0"`` at z = 0 made of
+        its top-level walls, map-frame tags and checkpoints."""
+        if self.floors:
+            return self.floors
+        return (implicit_floor(self.walls, self.tags, self.checkpoints),)
+
+    def floor_heights(self) -> dict[str, float]:
+        """Floor name -> height of its floor in ``map``, m."""
+        return {f.name: f.height_m for f in self.all_floors()}
+
+    def shafts(self) -> tuple[Shaft, ...]:
+        """The elevators; a single-floor world's ``elevator`` as a shaft named ``elevator``
+        (frame ``elevator_cab``, serving floor ``"0"``, never moving)."""
+        if self.elevators or self.elevator is None:
+            return self.elevators
+        fields = self.elevator.model_dump()
+        return (Shaft(**fields, name="elevator", frame=DEFAULT_CAB_FRAME, floors=("0",)),)
+
+    def plan_route(self) -> RoutePlan:
+        """The planned route (:class:`~tagloc.sim.ride.RidePlan` for a world with floors)."""
+        if not self.has_floors:
+            return plan_from_config(self.route, self.checkpoints_xy())
+        table = {
+            cp.name: ((cp.x, cp.y), floor.name)
+            for floor in self.all_floors()
+            for cp in floor.checkpoints
+        }
+        return plan_rides(self.route, self.all_floors(), self.elevators, table)
+
     def checkpoints_xy(self) -> dict[str, Vec2]:
-        """Checkpoint name -> ``(x, y)`` in ``map``."""
-        return {cp.name: (cp.x, cp.y) for cp in self.checkpoints}
+        """Checkpoint name -> ``(x, y)`` in ``map`` (of every floor)."""
+        checkpoints = [cp for f in self.floors for cp in f.checkpoints] or self.checkpoints
+        return {cp.name: (cp.x, cp.y) for cp in checkpoints}
+
+    def all_tags(self) -> tuple[tuple[Tag, str | None], ...]:
+        """Every tag with its floor's name (None for a cab's tag)."""
+        if not self.floors:
+            return tuple((t, "0" if t.frame == "map" else None) for t in self.tags)
+        floor_tags = tuple((t, f.name) for f in self.floors for t in f.tags)
+        return (*floor_tags, *((t, None) for t in self.tags))
 
     def find_tag(self, tag_id: int, family: str = "tag36h11") -> Tag:
         """The tag with this id and family. Raises ``SimulationError`` if there is none."""
-        for tag in self.tags:
+        for tag, _ in self.all_tags():
             if tag.id == tag_id and tag.family == family:
                 return tag
         raise SimulationError(f"world {self.name!r} has no tag {family}:{tag_id}")
 
-    def T_map_tag(self, tag: Tag) -> SE3:
-        """Pose of ``tag`` in ``map`` (cab tags go through ``elevator.T_map_cab()``)."""
-        if tag.frame == "map":
-            return tag.T_frame_tag()
-        if self.elevator is None:
-            raise SimulationError(f"tag {tag.id} is in elevator_cab but the world has no elevator")
-        return self.elevator.T_map_cab() @ tag.T_frame_tag()
+    def shaft_of(self, frame: str) -> Shaft:
+        """The shaft whose cab has ``frame``. Raises ``SimulationError``."""
+        for shaft in self.shafts():
+            if shaft.frame == frame:
+                return shaft
+        raise SimulationError(f"tag frame {frame} is no elevator cab's of world {self.name!r}")
 
-    def walls_in_map(self) -> tuple[Wall, ...]:
-        """The building's walls plus the elevator cab's walls, all in ``map``."""
-        if self.elevator is None:
-            return self.walls
-        T_map_cab = self.elevator.T_map_cab()
-        cab = [
-            Wall(
-                start=tuple(T_map_cab.act([*a, 0.0])[:2]),
-                end=tuple(T_map_cab.act([*b, 0.0])[:2]),
-                material=self.elevator.wall_material,
-                height=self.elevator.height,
-            )
-            for a, b in self.elevator.walls_cab()
-        ]
-        return (*self.walls, *cab)
+    def T_map_tag(self, tag: Tag) -> SE3:
+        """Pose of ``tag`` in ``map``: a floor's tag at its floor's height, a cab's tag with its
+        cab standing at its first floor (``shaft.first_floor``)."""
+        if not self.has_floors:
+            if tag.frame == "map":
+                return tag.T_frame_tag()
+            if self.elevator is None:
+                raise SimulationError(f"tag {tag.id} is in {tag.frame} but there is no elevator")
+            return self.elevator.T_map_cab() @ tag.T_frame_tag()
+        heights = self.floor_heights()
+        if tag.frame == "map":
+            floor = next((f for t, f in self.all_tags() if t is tag), None)
+            z = heights.get(floor, 0.0) if floor is not None else 0.0
+            T = tag.T_frame_tag()
+            return SE3(rotation=T.rotation, translation=T.translation + np.array([0.0, 0.0, z]))
+        shaft = self.shaft_of(tag.frame)
+        return shaft.T_map_cab(heights.get(shaft.first_floor, 0.0)) @ tag.T_frame_tag()
+
+    def walls_in_map(self, floor: str | None = None) -> tuple[Wall, ...]:
+        """The walls of ``floor`` (default: the first) plus the cab's walls of every elevator
+        standing there at the start (with its door open), all in ``map`` (heights above that
+        floor). A single-floor world: the building's walls and the elevator cab's."""
+        if not self.has_floors:
+            if self.elevator is None:
+                return self.walls
+            return (*self.walls, *cab_walls(self.elevator, self.elevator.T_map_cab()))
+        chosen = next((f for f in self.all_floors() if f.name == floor), self.all_floors()[0])
+        cabs = [
+            w for s in self.elevators if s.first_floor == chosen.name
+            for w in cab_walls(s, s.T_map_cab())
+        ]  # fmt: skip
+        return (*chosen.walls, *cabs)
 
     @classmethod
     def from_yaml_text(cls, text: str, source: str = "<string>") -> World:
@@ -345,7 +237,7 @@ def load_default_world() -> World:
 
 #: The built-in worlds (``tagloc/sim/worlds/<name>.yaml``); each file documents itself.
 BUILTIN_WORLDS = (
-    "office", "glass_corridor", "mirrored_lobby", "long_corridor", "sparse_building",
+    "office", "glass_corridor", "mirrored_lobby", "long_corridor", "sparse_building", "tower",
 )  # fmt: skip
 
 

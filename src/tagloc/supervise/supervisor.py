@@ -5,6 +5,11 @@ Fed by the streaming node (:class:`~tagloc.localize.node.LocalizerNode`): every 
 odometry sample the estimator's state (:meth:`Supervisor.step`), which may move the ladder.
 Fix sources are generic (:class:`FixSourceSpec`: a name, a role ``markers`` or ``lidar``, the
 input whose liveness it needs), so a lidar source joins without changing this module.
+
+In a building with elevators it also owns the map <-> cab handoff (:attr:`Supervisor.handoff`,
+:mod:`tagloc.supervise.cab`) and the floor (:attr:`Supervisor.floors`,
+:mod:`tagloc.supervise.floors`): in a cab the lidar is ignored (a hard reason: the ladder leaves
+``lidar_nominal`` at once), and the status carries the floor and the handoff's state.
 """
 
 from __future__ import annotations
@@ -14,7 +19,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
+from tagloc.supervise.cab import CabHandoff, CabState, ElevatorConfig
 from tagloc.supervise.config import SupervisorConfig
+from tagloc.supervise.floors import FloorBook
 from tagloc.supervise.health import (
     FixQualityMonitor,
     InputHealth,
@@ -72,11 +79,17 @@ class StatusReport:
     estimator: EstimatorState
     inputs: dict[str, InputHealth] = field(default_factory=dict)
     sources: dict[str, QualityVerdict] = field(default_factory=dict)
+    #: The floor (None: unknown, riding a cab, or a building without floors).
+    floor: str | None = None
+    #: The handoff's state (``in_map`` without elevators) and its cab frame ('' in the map).
+    cab: CabState = CabState.IN_MAP
+    cab_frame: str = ""
 
     def to_dict(self) -> dict[str, object]:
         """JSON-ready (non-finite numbers as None)."""
         e = self.estimator
         return {
+            "floor": self.floor, "cab": str(self.cab), "cab_frame": self.cab_frame,
             "stamp_ns": self.stamp_ns, "level": int(self.level), "level_name": self.level.label,
             "stale": self.stale, "initialized": e.initialized, "reacquiring": e.reacquiring,
             "since_fix_s": _num(e.since_fix_s), "since_fix_m": _num(e.since_fix_m),
@@ -108,13 +121,24 @@ class Supervisor:
     sources : sequence of FixSourceSpec
     gap_s, gap_m : float
         An estimate with no accepted fix for longer (or farther) is stale: nothing carries it.
+    elevators : ElevatorConfig, optional
+        With it, :attr:`handoff` is the map <-> cab handoff (None: no cab).
+    floor_heights_m : mapping of str to float, optional
+        The floors (name -> height in ``map``, m); with them :attr:`floors` books the floor.
     """
 
     def __init__(
         self, config: SupervisorConfig, sources: Sequence[FixSourceSpec], gap_s: float,
-        gap_m: float,
+        gap_m: float, elevators: ElevatorConfig | None = None,
+        floor_heights_m: dict[str, float] | None = None,
     ) -> None:  # fmt: skip
         self.config = config
+        self.handoff = None if elevators is None else CabHandoff(elevators)
+        self.floors = (
+            FloorBook(floor_heights_m, elevators.floor_confirm_fixes, elevators.floor_change_fixes)
+            if elevators is not None and floor_heights_m
+            else None
+        )
         self.sources = {s.name: s for s in sources}
         lad = config.ladder
         odo = config.odometry
@@ -192,10 +216,14 @@ class Supervisor:
         return False
 
     def status(self, stamp_ns: int, estimator: EstimatorState) -> StatusReport:
+        handoff, floors = self.handoff, self.floors
         return StatusReport(
             stamp_ns, self.level, self.level is Level.ODOMETRY_ONLY, estimator,
             {k: v.report(stamp_ns) for k, v in self._inputs.items()},
             {k: v.verdict() for k, v in self._quality.items()},
+            floors.floor if floors is not None and floors.known else None,
+            CabState.IN_MAP if handoff is None else handoff.state,
+            "" if handoff is None else handoff.cab_frame,
         )  # fmt: skip
 
     def _unmet(
@@ -233,6 +261,9 @@ class Supervisor:
         for role in ("markers", "lidar"):
             if not any(s.role == role for s in self.sources.values()):
                 hard_by_role[role].append(f"no {role} source")
+        if self.handoff is not None and self.handoff.state.in_cab:  # the cab's walls move
+            usable["lidar"] = alive_any["lidar"] = False
+            hard_by_role["lidar"].append(f"lidar ignored in the cab ({self.handoff.state})")
 
         def reasons(role: str, *, hard_only: bool) -> list[str]:
             if usable[role]:

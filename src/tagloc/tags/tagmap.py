@@ -66,6 +66,7 @@ MIN_TAG_SIZE_M, MAX_TAG_SIZE_M, MAX_COORD_M = 1e-3, 5.0, 1e5
 #: Largest covariance entry of a tag pose (m^2, rad^2): beyond it, products overflow downstream.
 MAX_COVARIANCE = 1e4
 _FRAME_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_./-]*")
+_FLOOR_NAME = re.compile(r"[A-Za-z0-9_.+-]{1,64}")
 _AXES = ("x", "y", "z", "rx", "ry", "rz")
 _INFLATIONS = (0.0, 1e-3, 3e-3, 1e-2, 3e-2, 1e-1)
 ModelT = TypeVar("ModelT", bound=pydantic.BaseModel)
@@ -110,6 +111,8 @@ class TagEntry(StrictModel):
     family: str = DEFAULT_FAMILY
     size: Real
     frame: str = MAP_FRAME
+    #: The storey a ``map`` tag is on (a name of the map's ``floors`` table), or None.
+    floor: str | None = None
     position: tuple[Real, Real, Real]
     quat_xyzw: tuple[Real, Real, Real, Real]
     anchor: bool = Field(default=False, strict=True)
@@ -196,7 +199,18 @@ class _TagMapModel(StrictModel):
 
     version: int | None = Field(default=None, strict=True)
     frames: tuple[str, ...] = (MAP_FRAME,)
+    floors: dict[str, Real] | None = None
     tags: tuple[TagEntry, ...] = ()
+
+    @field_validator("floors")
+    @classmethod
+    def _floors(cls, value: dict[str, float] | None) -> dict[str, float] | None:
+        for name, height in (value or {}).items():
+            if not _FLOOR_NAME.fullmatch(name):
+                raise FieldPathError((name,), "bad floor name (letters, digits, _ . + -)")
+            if not abs(height) <= MAX_COORD_M:
+                raise FieldPathError((name,), f"{height:g} m is beyond +-{MAX_COORD_M:g} m")
+        return value
 
     @field_validator("version")
     @classmethod
@@ -232,6 +246,10 @@ class _TagMapModel(StrictModel):
                     f"unknown frame {tag.frame!r}; declared: {', '.join(frames)} "
                     "(list moving frames in the top-level 'frames')",
                 )
+            floors = info.data.get("floors")
+            if tag.floor is not None and tag.floor not in (floors or {}):
+                known = ", ".join(floors or {}) or "none: add a top-level 'floors' table"
+                raise FieldPathError((k, "floor"), f"unknown floor {tag.floor!r} (floors: {known})")
         return tuple(sorted(value, key=lambda tag: tag.key))
 
 
@@ -249,22 +267,29 @@ class TagMap:
 
     frames: tuple[str, ...] = (MAP_FRAME,)
     tags: tuple[TagEntry, ...] = ()
+    #: Floor name -> height of that floor in ``map`` (m), for a building of several; or None.
+    floors: dict[str, float] | None = None
     _index: dict[tuple[str, int], TagEntry] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        model = _validated(_TagMapModel, {"frames": self.frames, "tags": self.tags}, "tag map")
+        data = {"frames": self.frames, "tags": self.tags, "floors": self.floors}
+        model = _validated(_TagMapModel, data, "tag map")
         object.__setattr__(self, "frames", model.frames)
         object.__setattr__(self, "tags", model.tags)
+        object.__setattr__(self, "floors", model.floors)
         object.__setattr__(self, "_index", {tag.key: tag for tag in model.tags})
 
     @classmethod
     def from_entries(
-        cls, entries: Iterable[TagEntry], frames: Iterable[str] | None = None
+        cls,
+        entries: Iterable[TagEntry],
+        frames: Iterable[str] | None = None,
+        floors: dict[str, float] | None = None,
     ) -> TagMap:
         """A map of ``entries``; ``frames`` defaults to ``map`` plus every frame they use."""
         tags = tuple(entries)
         frame_names = {MAP_FRAME, *(t.frame for t in tags)} if frames is None else frames
-        return cls(frames=tuple(frame_names), tags=tags)
+        return cls(frames=tuple(frame_names), tags=tags, floors=floors)
 
     def __iter__(self) -> Iterator[TagEntry]:
         return iter(self.tags)
@@ -328,12 +353,16 @@ class TagMap:
         except ConfigError as exc:
             raise TagMapError(str(exc)) from None
         model = _validated(_TagMapFile, data, source)
-        return cls(frames=model.frames, tags=model.tags)
+        return cls(frames=model.frames, tags=model.tags, floors=model.floors)
 
     def to_yaml_text(self) -> str:
         """The map as ``tags.yaml`` text: header comment, fixed layout, stable bytes."""
         lines = [*_HEADER, f"version: {FORMAT_VERSION}"]
         lines.append(f"frames: [{', '.join(_plain(f) for f in self.frames)}]")
+        if self.floors is not None:
+            lines.append("# floors: floor name -> height of its floor in map (m); a tag's floor.")
+            table = ", ".join(f"{json.dumps(k)}: {_height(v)}" for k, v in self.floors.items())
+            lines.append(f"floors: {{{table}}}")
         lines.append("tags:" if self.tags else "tags: []")
         for tag in self.tags:
             lines += ["", *_entry_lines(tag)]
@@ -400,6 +429,10 @@ def _entry_problem(tag: TagEntry) -> tuple[Path_, str] | None:
         return ("size",), f"{tag.size:g} is outside {bounds}: sizes are metres, not millimetres"
     if not _FRAME_NAME.fullmatch(tag.frame):
         return ("frame",), f"bad frame name {short_repr(tag.frame)} (letters, digits, _ . / -)"
+    if tag.floor is not None and tag.frame != MAP_FRAME:
+        return ("floor",), f"only a map tag is on a floor (this one is in {tag.frame})"
+    if tag.floor is not None and not _FLOOR_NAME.fullmatch(tag.floor):
+        return ("floor",), f"bad floor name {short_repr(tag.floor)} (letters, digits, _ . + -)"
     for k, coordinate in enumerate(tag.position):
         if abs(coordinate) > MAX_COORD_M:
             return ("position", k), f"{coordinate:g} m is beyond +-{MAX_COORD_M:g} m"
@@ -460,6 +493,11 @@ def _fixed(value: float, decimals: int) -> str:
     return text[1:] if text.startswith("-") and float(text) == 0.0 else text
 
 
+def _height(value: float) -> str:
+    text = _fixed(value, 6).rstrip("0")
+    return text + "0" if text.endswith(".") else text
+
+
 def _sci(value: float) -> str:
     text = f"{value:.2e}"
     return text[1:] if text.startswith("-") and float(text) == 0.0 else text
@@ -509,6 +547,7 @@ def _entry_lines(tag: TagEntry) -> list[str]:
         f"    family: {tag.family}",
         f"    size: {size}0" if size.endswith(".") else f"    size: {size}",
         f"    frame: {_plain(tag.frame)}",
+        *([f"    floor: {json.dumps(tag.floor)}"] if tag.floor is not None else []),
         f"    position: [{', '.join(_fixed(v, 6) for v in tag.position)}]",
         f"    quat_xyzw: [{', '.join(_quat_for_file(tag.quat_xyzw))}]",
     ]
