@@ -74,6 +74,9 @@ class RosEncoder:
             transform = t["Transform"](t["Vector3"](*tr), self._quat(msg.T_parent_child))
             header = self._header(msg.stamp_ns, msg.parent, seq)
             return t["TFMessage"]([t["TransformStamped"](header, msg.child, transform)])
+        if isinstance(msg, m.ElevatorStateMsg):
+            # a building's elevator state has no standard ROS message: not recorded in bags
+            raise TypeError("ElevatorStateMsg has no ROS message type; it is not written to bags")
         header = self._header(msg.stamp_ns, msg.frame_id, seq)
         if isinstance(msg, m.OdometryMsg):
             T = msg.T_parent_child
