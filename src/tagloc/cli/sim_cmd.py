@@ -80,7 +80,7 @@ def sim_record(
         _remove_bag(out)
         raise
     typer.echo(
-        f"wrote {out} ({bag_format}, {n} messages, {len(source.frames)} camera frames, "
+        f"wrote {out} ({bag_format}, {n} messages, {source.n_frames} camera frames, "
         f"topics {', '.join(sorted(source.topics))}) and {tags_path}"
     )
 
