@@ -9,7 +9,14 @@ growth and slow-down show as a trend. The last line compares memory at the end w
 at 10 minutes (flat: within 10 %). A shorter check of the same: ``--minutes 12 --every 1.667``
 (rows at 100 s ... 700 s of the drive).
 
-    python benchmarks/bench_soak.py [--minutes 60] [--every 5]
+With ``--cli-sinks`` the node runs with the sinks ``tagloc localize`` attaches (the run's
+files in a temporary directory, the mounting check's recorder, the report), and a first pass of
+the same stream through the node alone (a counting sink) gives the reference rows, so the
+sinks' share shows against the node's in the same process; the last column is what the
+mounting check's recorder holds.
+
+    python benchmarks/bench_soak.py [--minutes 12] [--every 1.667] [--cli-sinks]
+    python benchmarks/bench_soak.py --minutes 60 --every 5 --cli-sinks   # the hour
 """
 
 from __future__ import annotations
@@ -18,12 +25,14 @@ import argparse
 import math
 import time
 import tracemalloc
+from pathlib import Path
 
 import numpy as np
 
 from tagloc.eval.scenarios import calibrated_config, scenario_config
+from tagloc.localize.config import LocalizerConfig
 from tagloc.localize.node import LocalizerNode
-from tagloc.localize.outputs import NodeOutput
+from tagloc.localize.outputs import NodeOutput, OutputSink
 from tagloc.messages import OdometryMsg, TagDetectionsMsg
 from tagloc.sim import load_default_world
 from tagloc.sim.drive import simulate_drive
@@ -75,8 +84,10 @@ def ms(samples: list[float]) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--minutes", type=float, default=60.0)
-    parser.add_argument("--every", type=float, default=5.0, help="minutes per row")
+    parser.add_argument("--minutes", type=float, default=12.0, help="60: the hour")
+    parser.add_argument("--every", type=float, default=5.0 / 3.0, help="minutes per row")
+    parser.add_argument("--cli-sinks", action="store_true",
+                        help="also run with tagloc localize's sinks (after the node alone)")
     parser.add_argument(
         "--rss-only", action="store_true",
         help="no tracemalloc (3-4x faster): the traced columns read 0, RSS is the measure",
@@ -87,15 +98,37 @@ def main() -> None:
     source = ScenarioSource(scenario)
     build_s = time.perf_counter() - t_build
     config = calibrated_config(scenario, scenario_config())
-    node = LocalizerNode(scenario.tag_map, config, [CountingSink()], frame_truth=source.frame_truth)
-    n_odom, n_frames = len(scenario.drive.stamps_ns), len(source.frames)
+    n_odom, n_frames = len(scenario.drive.stamps_ns), source.n_frames
     span_min = (scenario.drive.stamps_ns[-1] - scenario.drive.stamps_ns[0]) / S / 60
     print(f"{span_min:.1f} min of stream (asked: {args.minutes:g}; a simulated drive holds at "
           f"most 500 000 odometry samples): {n_odom} odometry samples at 200 Hz, {n_frames} "
           f"camera frames at 30 Hz (built in {build_s:.0f} s)")  # fmt: skip
+    passes = [("node alone", None)] + ([("with tagloc localize's sinks", True)]
+                                        if args.cli_sinks else [])  # fmt: skip
+    for title, cli in passes:
+        print(f"\n{title}")
+        soak(scenario, source, config, args, cli is not None)
+
+
+def soak(scenario: Scenario, source: ScenarioSource, config: LocalizerConfig,
+         args: argparse.Namespace, cli: bool) -> None:  # fmt: skip
+    """One pass of the stream through a node (module docstring), printing the rows."""
+    import tempfile
+
+    from tagloc.eval.run_report import RunReportSink
+    from tagloc.io.node_sinks import RunFilesSink
+    from tagloc.localize.extrinsic_check import ExtrinsicRecorder
+
+    tmp = tempfile.TemporaryDirectory()
+    recorder = ExtrinsicRecorder()
+    sinks: list[OutputSink] = [CountingSink()]
+    if cli:
+        sinks += [RunFilesSink(Path(tmp.name), "map", bag=False), recorder,
+                  RunReportSink("soak")]  # fmt: skip
+    node = LocalizerNode(scenario.tag_map, config, sinks, frame_truth=source.frame_truth)
     header = (f"{'minute':>6} | {'traced MB':>9} | {'peak MB':>8} | {'RSS MB':>7} | "
               f"{'odometry feed ms p50/p99/max':>28} | {'frame feed ms p50/p99/max':>26} | "
-              "wall s")  # fmt: skip
+              "wall s | recorder fixes / odometry")  # fmt: skip
     print(header)
     print("-" * len(header))
     t0 = int(scenario.drive.stamps_ns[0])
@@ -126,7 +159,8 @@ def main() -> None:
             rss_rows.append((minute, rss_mb()))
             print(f"{minute:6.1f} | {traced:9.2f} | {(peak - base) / 2**20:8.2f} | "
                   f"{rss_mb():7.1f} | {ms(odo):>28} | {ms(frm):>26} | "
-                  f"{time.perf_counter() - wall0:.0f}", flush=True)  # fmt: skip
+                  f"{time.perf_counter() - wall0:.0f} | {recorder.held['fixes']} / "
+                  f"{recorder.held['odometry']}", flush=True)  # fmt: skip
             odo, frm = [], []
             next_row += every_ns
     node.finish()
@@ -139,6 +173,8 @@ def main() -> None:
     if at10 and rows and not args.rss_only:
         print(f"traced memory at the end / at 10 min: {rows[-1][1]:.2f} / {at10[0]:.2f} MB "
               f"= {rows[-1][1] / at10[0]:.3f} (flat: within 10 %)")  # fmt: skip
+
+    tmp.cleanup()
 
 
 if __name__ == "__main__":

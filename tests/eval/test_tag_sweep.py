@@ -271,3 +271,12 @@ def test_cli_bad_input_is_one_error_line(tmp_path: Path) -> None:
         assert len(lines) == 1 and lines[0].startswith("tagloc: error: "), done.stderr
         assert expected in lines[0]
     assert not (tmp_path / "out").exists()
+
+
+def test_a_tag_of_the_wrong_size_fails_the_position_checks(tiny: TagSweepResult) -> None:
+    wrong = run_tag_sweep(TINY.model_copy(update={"sensor_tag_size_m": 0.9 * TINY.tag_size_m,
+                                                  "joint_tag_counts": ()}))  # fmt: skip
+    checks = {c.name.split(" (")[0]: c for c in wrong.checks}
+    # 10 % small: every range 10 % short, 20 cm at 2 m (the truth is the renderer's)
+    assert checks["position error median at 2 m"].passed is False
+    assert checks["position error median at 2 m"].value > 0.1

@@ -208,3 +208,40 @@ def test_the_right_camera_passes_and_a_halved_focal_is_refused(sim_stream) -> No
     info = check_camera(messages, half, scenario.tag_map, camera_info_topic="/camera/camera_info",
                         **options)  # fmt: skip
     assert any("fx = 640.0 px" in p for p in info.problems), info
+
+
+def _sim_check(seed: int, duration_s: float, misset: bool):  # type: ignore[no-untyped-def]
+    """The mounting check of the node's run on the default scenario (legged odometry), the
+    node given the true mounting or one 1 deg / 3 cm off."""
+    from functools import partial
+
+    from tagloc.eval.scenarios import calibrated_config, scenario_config
+    from tagloc.localize import LocalizerNode, record_run
+    from tagloc.sim.scenarios import ScenarioSource, build_scenario
+
+    scenario = build_scenario("default", seed, duration_s)
+    source = ScenarioSource(scenario, lidar=False)
+    used = source.T_base_cam @ SE3.exp(MISSET) if misset else source.T_base_cam
+    config = calibrated_config(scenario, scenario_config())
+    config = config.model_copy(update={"lidar": config.lidar.model_copy(update={"enabled": False})})
+    node = partial(LocalizerNode, scenario.tag_map, config, T_base_cam=used,
+                   frame_truth=source.frame_truth)  # fmt: skip
+    return check_run_extrinsics(record_run(node, source), used)
+
+
+def test_a_simulated_legged_drive_with_the_right_camera_is_not_warned() -> None:
+    check = _sim_check(0, 120.0, misset=False)
+    assert check is not None and check.warning is None, check.to_dict()
+
+
+@pytest.mark.slow
+def test_a_simulated_misset_camera_is_warned_on_a_legged_drive() -> None:
+    check = _sim_check(0, 120.0, misset=True)
+    assert check is not None and check.warning is not None, check.to_dict()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", range(1, 10))
+def test_ten_simulated_drives_with_the_right_camera_are_not_warned(seed: int) -> None:
+    check = _sim_check(seed, 120.0, misset=False)
+    assert check is None or check.warning is None, check.to_dict()

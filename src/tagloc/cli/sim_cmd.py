@@ -84,7 +84,7 @@ def sim_record(
         _remove_bag(out)
         raise
     typer.echo(
-        f"wrote {out} ({bag_format}, {n} messages, {len(source.frames)} camera frames, "
+        f"wrote {out} ({bag_format}, {n} messages, {source.n_frames} camera frames, "
         f"topics {', '.join(sorted(set(source.topics) - {source.t.elevator}))}) and {tags_path}"
     )
 

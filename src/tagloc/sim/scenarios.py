@@ -47,7 +47,6 @@ from tagloc.geometry import SE3
 from tagloc.messages import (
     CameraInfoMsg,
     ElevatorStateMsg,
-    FrameTruth,
     GroundTruthMsg,
     Message,
     NodeTopics,
@@ -59,9 +58,10 @@ from tagloc.messages import (
 from tagloc.sim.drive import Drive, simulate_drive
 from tagloc.sim.elevator_stream import elevator_messages
 from tagloc.sim.faults import ClockJump, DropMessages, DuplicateMessages, StreamFault, apply_faults
+from tagloc.sim.frame_truth import FrameTruthMap
 from tagloc.sim.lidar import LIDAR_FRAME, LidarSimulator, Sweep, premap_from_world
 from tagloc.sim.lidar_floors import lidar_for_drive
-from tagloc.sim.observations import ObservationConfig, simulate_observations
+from tagloc.sim.observations import ObservationConfig, ObservedFrame, simulate_observations
 from tagloc.sim.odometry_ride import ImuFusionConfig
 from tagloc.sim.people import Person, crowd_around
 from tagloc.sim.ride_schedule import pacing_passengers, random_ride_route
@@ -465,6 +465,8 @@ class ScenarioSource:
     :class:`~tagloc.io.BagSink` gives it; simulated lazily as the stream is read:
     :mod:`tagloc.sim.lidar`); then the scenario's ``faults`` rewrite that stream.
     :attr:`frame_truth` holds what only the simulator knows (glints, tags truly in view).
+    Camera frames are simulated as the stream is read, and only the recent frames' truth is
+    kept (:class:`~tagloc.sim.frame_truth.FrameTruthMap`): memory does not grow with the drive.
     """
 
     def __init__(
@@ -474,24 +476,30 @@ class ScenarioSource:
         ignores them need not simulate them: 4 ms of CPU per sweep)."""
         self.scenario, self.t = scenario, topics or NodeTopics()
         drive = scenario.drive
-        self.frames = list(
-            simulate_observations(
-                drive, scenario.observation, stamps_ns=scenario.camera_stamps_ns,
-                world=scenario.world,
-            )
-        )  # fmt: skip
-        self.frame_truth = {
-            f.stamp_ns: FrameTruth(
-                f.false_detection, min((s.range_m for s in f.truth), default=math.inf)
-            )
-            for f in self.frames
-        }
+        self.frame_truth = FrameTruthMap(scenario.camera_stamps_ns, self._observe)
+        self.glints_injected = 0  # false detections streamed so far
         robot = scenario.world.robot
         self.camera = robot.camera.camera_model()
         self.T_base_cam = robot.camera.T_base_cam.T_base_cam()
         self.lidar: LidarSimulator | None = None
         if robot.lidar is not None and lidar:
             self.lidar = lidar_for_drive(robot.lidar, scenario.world, scenario.people, drive)
+
+    def _observe(self, stamps_ns: npt.NDArray[np.int64]) -> Iterator[ObservedFrame]:
+        scenario = self.scenario
+        return simulate_observations(
+            scenario.drive, scenario.observation, stamps_ns=stamps_ns, world=scenario.world
+        )
+
+    @property
+    def n_frames(self) -> int:
+        """Camera frames the stream holds."""
+        return len(self.scenario.camera_stamps_ns)
+
+    @property
+    def frames(self) -> list[ObservedFrame]:
+        """Every camera frame of the drive, simulated again (the whole drive in memory)."""
+        return list(self._observe(self.scenario.camera_stamps_ns))
 
     @property
     def topics(self) -> dict[str, type[Message]]:
@@ -516,6 +524,7 @@ class ScenarioSource:
         t0 = int(drive.stamps_ns[0])
         yield t.camera_info, CameraInfoMsg(t0, CAMERA_FRAME, self.camera.to_camera_info())
         yield TF_STATIC, TransformMsg(t0, BASE_FRAME, CAMERA_FRAME, self.T_base_cam, static=True)
+        self.glints_injected = 0
         sweeps: Iterator[Sweep] = iter(())
         if self.lidar is not None:
             T_base_lidar = self.lidar.T_base_lidar
@@ -523,7 +532,7 @@ class ScenarioSource:
             starts = self.lidar.sweep_starts_ns(t0, int(drive.stamps_ns[-1]))
             sweeps = self.lidar.sweeps(lambda st: drive.ground_truth_at(st).xy_yaw_map_base, starts)
         sweep = next(sweeps, None)
-        frames = iter(self.frames)
+        frames = self._observe(self.scenario.camera_stamps_ns)
         frame = next(frames, None)
         building = iter(elevator_messages(drive) if self.scenario.elevator_topic else ())
         state = next(building, None)
@@ -539,6 +548,8 @@ class ScenarioSource:
                     break
                 if t_frame <= t_sweep:
                     assert frame is not None
+                    self.frame_truth.record(frame)
+                    self.glints_injected += sum(frame.false_detection)
                     yield (
                         t.detections,
                         TagDetectionsMsg(frame.stamp_ns, CAMERA_FRAME, frame.detections),
