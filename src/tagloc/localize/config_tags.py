@@ -17,6 +17,7 @@ from typing import Literal
 from pydantic import Field, field_validator, model_validator
 
 from tagloc.config import StrictModel, short_repr
+from tagloc.localize.config_roi import RegionConfig
 from tagloc.tags import GateConfig, NoiseModel
 from tagloc.tags.families import known_families
 
@@ -124,3 +125,5 @@ class TagSensorConfig(StrictModel):
     ambiguity_log_odds_with_prior: float | None = Field(9.2, ge=0, le=1e6)
     #: Two detections whose corners all lie within this distance (px) are one quad.
     shared_quad_px: float = Field(3.0, ge=0, le=1e4)
+    #: Detection in the regions where mapped tags are predicted (``docs/detection.md``).
+    roi: RegionConfig = RegionConfig()

@@ -29,6 +29,7 @@ from tagloc.errors import TransformLookupError
 from tagloc.geometry import SE3
 from tagloc.localize.config import LocalizerConfig
 from tagloc.localize.fiducial import E_Z, FiducialConfig, FiducialFixSource, FrameFixes
+from tagloc.localize.roi_detector import region_detector
 from tagloc.localize.run import CameraFrameRecord, FixAttempt
 from tagloc.localize.sources import (
     Arrival,
@@ -82,6 +83,7 @@ class TagSource:
         self._source: FiducialFixSource | None = None
         self._recent: OrderedDict[int, None] = OrderedDict()
         self.skipped = SkipCounter()
+        self._regions = region_detector(config, inputs.tag_map)
 
     @property
     def camera(self) -> CameraModel | None:
@@ -120,6 +122,8 @@ class TagSource:
         """One frame: its fixes (with the filter's estimate as the prior), refusals, record."""
         assert isinstance(payload, _Frame)
         frame = payload
+        if self._regions is not None:
+            self._regions.observe(context)
         source = self._fix_source(frame, context, quiet=False)
         if source is None:
             return None
@@ -168,9 +172,11 @@ class TagSource:
         """Forget the frame stamps seen and the extrinsics looked up on the old timeline."""
         self._recent.clear()
         self._source = None
+        if self._regions is not None:
+            self._regions.reset()
 
     def metadata(self) -> dict[str, Any]:
-        return {}
+        return {} if self._regions is None else {"regions": self._regions.stats.to_dict()}
 
     # ----- the wall clock's worker -----------------------------------------------------------
     def fixer(
@@ -218,6 +224,10 @@ class TagSource:
 
                 tags = self._config.tags
                 self._detector = make_detector(tags.backend, tags.family)
+            if self._regions is not None:
+                return tuple(self._regions.detect(
+                    msg.stamp_ns, msg.image, self._detector, cam, self.T_base_cam
+                ))  # fmt: skip
             return tuple(self._detector.detect(msg.image))
         except Exception as exc:  # a detector's failure on one frame must not stop the node
             self.skipped.skip("detector_error", f"frame at {msg.stamp_ns} ns: {exc!r}")
