@@ -17,6 +17,7 @@ from typing import Literal
 from pydantic import Field, field_validator, model_validator
 
 from tagloc.config import StrictModel, short_repr
+from tagloc.localize.config_roi import RegionConfig
 from tagloc.tags import GateConfig, NoiseModel
 from tagloc.tags.families import known_families
 
@@ -153,3 +154,5 @@ class TagSensorConfig(FiducialConfig):
         return family
 
     noise: NoiseModel = NoiseModel()
+    #: Detection in the regions where mapped tags are predicted (``docs/detection.md``).
+    roi: RegionConfig = RegionConfig()

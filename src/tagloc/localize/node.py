@@ -316,7 +316,9 @@ class LocalizerNode:
             )
 
     def _context(self) -> FixContext:
-        return FixContext(self._fusion.buffer, self._fusion.filter, self._last_odom)
+        return FixContext(
+            self._fusion.buffer, self._fusion.filter, self._last_odom, int(self.supervisor.level)
+        )
 
     def _run_due(self, odom_ns: int | None) -> None:
         """Form and decide the fixes of the work the odometry up to ``odom_ns`` covers."""

@@ -30,6 +30,7 @@ from tagloc.errors import TransformLookupError
 from tagloc.geometry import SE3
 from tagloc.localize.config import LocalizerConfig
 from tagloc.localize.fiducial import E_Z, FiducialFixSource, FrameFixes
+from tagloc.localize.roi_detector import RegionDetector, RegionStats, region_detector
 from tagloc.localize.run import CameraFrameRecord, FixAttempt
 from tagloc.localize.sources import (
     Arrival,
@@ -83,6 +84,12 @@ class TagSource:
         self._slots = camera_slots(inputs.cameras, inputs.topics, inputs.camera,
                                    inputs.T_base_cam)  # fmt: skip
         self.skipped = SkipCounter()
+        # predicted-region detection keeps its state per camera
+        self._regions: dict[str, RegionDetector] = {}
+        for slot in self._slots:
+            regions = region_detector(config, inputs.tag_map)
+            if regions is not None:
+                self._regions[slot.name] = regions
 
     @property
     def camera(self) -> CameraModel | None:
@@ -134,6 +141,8 @@ class TagSource:
         assert isinstance(payload, _Frame)
         frame = payload
         slot = frame.slot or self._slots[0]
+        for regions in self._regions.values():
+            regions.observe(context)
         source = self._fix_source(slot, frame, context, quiet=False)
         if source is None:
             return None
@@ -184,9 +193,13 @@ class TagSource:
         """Forget the frame stamps seen and the extrinsics looked up on the old timeline."""
         for slot in self._slots:
             slot.reset()
+        for regions in self._regions.values():
+            regions.reset()
 
     def metadata(self) -> dict[str, Any]:
-        return {}
+        if not self._regions:
+            return {}
+        return {"regions": RegionStats.total(r.stats for r in self._regions.values()).to_dict()}
 
     # ----- the wall clock's worker -----------------------------------------------------------
     def fixer(
@@ -232,6 +245,11 @@ class TagSource:
 
                 tags = self._config.tags
                 self._detector = make_detector(tags.backend, tags.family)
+            regions = self._regions.get(slot.name)
+            if regions is not None:
+                return tuple(regions.detect(
+                    msg.stamp_ns, msg.image, self._detector, cam, self.extrinsics(slot)
+                ))  # fmt: skip
             return tuple(self._detector.detect(msg.image))
         except Exception as exc:  # a detector's failure on one frame must not stop the node
             self.skipped.skip("detector_error", f"frame at {msg.stamp_ns} ns: {exc!r}")
@@ -273,7 +291,7 @@ class TagSource:
         return slot.source
 
     def _up_base(self, context: FixContext, stamp_ns: int) -> FloatArray | None:
-        """"Up" in the base at ``stamp_ns`` for a gravity-aligned odometry (None: the fix
+        """ "Up" in the base at ``stamp_ns`` for a gravity-aligned odometry (None: the fix
         source's default, an upright base's ``+z`` or no up)."""
         frames = self._config.frames
         if not self._config.odometry_frame.gravity_aligned:

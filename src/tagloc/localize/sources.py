@@ -98,11 +98,13 @@ class Arrival:
 
 @dataclass(frozen=True, slots=True)
 class FixContext:
-    """What a source may read when it forms fixes: the node's state now."""
+    """What a source may read when it forms fixes: the node's state now (``level``: the
+    supervisor's ladder level, :class:`~tagloc.supervise.Level`; None unknown)."""
 
     buffer: TransformBuffer
     filter: MapOdomFilter
     last_odom_ns: int | None
+    level: int | None = None
 
 
 @dataclass(frozen=True, slots=True)

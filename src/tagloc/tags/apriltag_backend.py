@@ -118,7 +118,7 @@ class AprilTagDetector:
         import pupil_apriltags
 
         self._family = family
-        self._min_side_px = max(MIN_IMAGE_SIDE_PX, math.ceil(4.0 * float(quad_decimate)))
+        self._quad_decimate = float(quad_decimate)
         self._detector: Any = pupil_apriltags.Detector(
             families=spec.apriltag_name,
             nthreads=nthreads,
@@ -146,20 +146,43 @@ class AprilTagDetector:
         """The sharpening the C detector really uses (read back from its struct)."""
         return float(self._detector.tag_detector_ptr.contents.decode_sharpening)
 
-    def detect(self, image_gray: npt.NDArray[np.generic]) -> list[TagDetection]:
+    @property
+    def quad_decimate(self) -> float:
+        """The decimation :meth:`detect` uses unless told otherwise."""
+        return self._quad_decimate
+
+    def detect(
+        self, image_gray: npt.NDArray[np.generic], quad_decimate: float | None = None
+    ) -> list[TagDetection]:
         """Detect tags; see :meth:`tagloc.tags.detection.TagDetector.detect`.
+
+        ``quad_decimate`` overrides the detector's decimation for this call (a region of an
+        image whose tags are known to be large or small, :mod:`tagloc.tags.regions`).
 
         Raises
         ------
         TagInputError
             If the image is not usable (the message says why).
+        TagBackendError
+            If ``quad_decimate`` is out of range.
         """
         gray = as_gray_u8(image_gray, "image_gray")
-        if min(gray.shape) < self._min_side_px:
-            logger.debug("image %s below %d px a side: no detection", gray.shape, self._min_side_px)
+        decimate = self._quad_decimate
+        if quad_decimate is not None:
+            _check_real(quad_decimate, "quad_decimate", 1.0, 64.0)
+            decimate = float(quad_decimate)
+        min_side = max(MIN_IMAGE_SIDE_PX, math.ceil(4.0 * decimate))
+        if min(gray.shape) < min_side:
+            logger.debug("image %s below %d px a side: no detection", gray.shape, min_side)
             return []
+        struct = self._detector.tag_detector_ptr.contents
+        struct.quad_decimate = decimate
+        try:
+            raws = self._detector.detect(gray)
+        finally:
+            struct.quad_decimate = self._quad_decimate
         detections = []
-        for raw in self._detector.detect(gray):
+        for raw in raws:
             try:
                 detections.append(
                     TagDetection.from_corners(
