@@ -46,6 +46,7 @@ from tagloc.io.errors import BagWriteError
 from tagloc.messages import (
     MESSAGE_TYPES,
     CameraInfoMsg,
+    ElevatorStateMsg,
     GroundTruthMsg,
     ImageMsg,
     Message,
@@ -299,6 +300,8 @@ class _Encoder:
 
     def encode(self, msg: Message, seq: int) -> Any:
         """The ROS message object of ``msg``."""
+        if isinstance(msg, ElevatorStateMsg):  # no ROS message type for it yet
+            raise BagWriteError("a building's elevator state has no bag message type yet")
         t = self._t
         if isinstance(msg, TransformMsg):
             tr = msg.T_parent_child.translation
