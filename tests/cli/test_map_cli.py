@@ -116,3 +116,20 @@ def test_the_typer_app_directly(maps: tuple[Path, Path, Path]) -> None:
     assert runner.invoke(map_app, ["diff", "--exit-code", str(good), str(new)]).exit_code == 1
     result = runner.invoke(map_app, ["check", str(bad)])
     assert isinstance(result.exception, TagMapError)  # main() turns it into one line, exit 1
+
+
+def test_check_warns_about_floors_on_stderr_and_exits_0(tmp_path: Path) -> None:
+    path = tmp_path / "building.yaml"
+    path.write_text(
+        'version: 1\nfloors: {"0": 0.0, "1": 3.5}\ntags:\n'
+        '  - {id: 1, size: 0.16, floor: "1", position: [0.0, 3.0, 1.2],'
+        " quat_xyzw: [0.5, 0.5, 0.5, 0.5]}\n"
+    )
+    result = run_tagloc("map", "check", str(path))
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith(f"{path}: ok: 1 tags")
+    assert result.stderr.splitlines() == [
+        f"{path}: warning: tags[0] (id 1): floor: z 1.20 m is not on floor 1 (3.5 m; expected "
+        "3.2 m <= z < 8.5 m)",
+        f"{path}: warning: floors.0: no tag is on this floor (it cannot be told by its tags)",
+    ]

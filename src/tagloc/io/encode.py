@@ -13,6 +13,7 @@ import numpy as np
 
 from tagloc import messages as m
 from tagloc.io.convert import TAGS_ROS1, TAGS_ROS2, cov_ros_from_body, make_typestore
+from tagloc.io.errors import BagWriteError
 from tagloc.tags.families import family_spec
 
 __all__ = ["RosEncoder"]
@@ -76,7 +77,8 @@ class RosEncoder:
             return t["TFMessage"]([t["TransformStamped"](header, msg.child, transform)])
         if isinstance(msg, m.ElevatorStateMsg):
             # a building's elevator state has no standard ROS message: not recorded in bags
-            raise TypeError("ElevatorStateMsg has no ROS message type; it is not written to bags")
+            raise BagWriteError("a building's elevator state has no ROS message type: it is not "
+                                "written to bags")  # fmt: skip
         header = self._header(msg.stamp_ns, msg.frame_id, seq)
         if isinstance(msg, m.OdometryMsg):
             T = msg.T_parent_child

@@ -50,17 +50,23 @@ def cab_walls(cab: Elevator, T_map_cab: SE3, door_closed: bool = False) -> list[
     ]
 
 
+def _where(prefix: tuple[str | int, ...], j: int) -> str:
+    """``("floors", 0, "tags"), 3`` -> ``floors[0].tags[3]``."""
+    text = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in (*prefix, j))
+    return text[1:]
+
+
 def _unique_tags(groups: Sequence[tuple[tuple[str | int, ...], Sequence[Tag]]]) -> None:
     seen: dict[tuple[str, int], str] = {}
     for prefix, tags in groups:
         for j, tag in enumerate(tags):
-            where = ".".join(str(p) for p in prefix) + f"[{j}]"
+            where = _where(prefix, j)
             if (tag.family, tag.id) in seen:
                 raise FieldPathError(
                     (*prefix, j, "id"),
                     f"duplicate tag id {tag.id} (also {seen[tag.family, tag.id]})",
                 )
-            seen[tag.family, tag.id] = where.replace(".[", "[")
+            seen[tag.family, tag.id] = where
 
 
 def _cab_tag(j: int, tag: Tag, cab: Elevator | None, frame: str) -> None:
@@ -102,7 +108,7 @@ def _unique_checkpoints(
                     (*prefix, j, "name"),
                     f"duplicate checkpoint {cp.name!r} (also {names[cp.name]})",
                 )
-            names[cp.name] = ".".join(str(p) for p in prefix).replace(".[", "[") + f"[{j}]"
+            names[cp.name] = _where(prefix, j)
 
 
 def check_building(

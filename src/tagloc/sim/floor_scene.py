@@ -96,7 +96,7 @@ class SceneCache:
         plan = self.plan
         t = np.array([min(max(t_s, 0.0), plan.total_duration_s)])
         z = float(plan.robot_z.z(t)[0])
-        floor = plan.floor_of(z)
+        floor = None if plan.robot_z.moving(t)[0] else plan.floor_of(z)
         inside = plan.cab_of(t, np.asarray(xy, dtype=np.float64).reshape(1, 2))[0]
         states = []
         for cab in plan.cabs:

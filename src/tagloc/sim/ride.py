@@ -101,8 +101,9 @@ class RidePlan(RoutePlan):
 
     def floor_at(self, t_s: npt.ArrayLike) -> list[str | None]:
         """The robot's floor at each ``t_s``: a floor's name, or None during a trip."""
-        z = self.robot_z.z(np.clip(t_s, 0.0, self.total_duration_s))
-        return [self.floor_of(float(v)) for v in z]
+        t = np.clip(t_s, 0.0, self.total_duration_s)
+        z, moving = self.robot_z.z(t), self.robot_z.moving(t)
+        return [None if m else self.floor_of(float(v)) for v, m in zip(z, moving, strict=True)]
 
     def floor_of(self, z: float) -> str | None:
         """The floor at height ``z`` (within a micrometre), or None."""
@@ -111,7 +112,9 @@ class RidePlan(RoutePlan):
 
     def cab_floor_at(self, t_s: npt.ArrayLike, elevator: str | None = None) -> list[str | None]:
         """Where the cab stands at each ``t_s`` (a floor's name; None while it moves)."""
-        return [self.floor_of(float(v)) for v in self.cab(elevator).z.z(t_s)]
+        z_line = self.cab(elevator).z
+        z, moving = z_line.z(t_s), z_line.moving(t_s)
+        return [None if m else self.floor_of(float(v)) for v, m in zip(z, moving, strict=True)]
 
     def cab_of(self, t_s: npt.ArrayLike, xy: FloatArray) -> list[str | None]:
         """The cab (its shaft's name) the robot, at planar ``xy`` (N, 2) at ``t_s`` (N,), is in."""

@@ -66,6 +66,8 @@ def check_route_budget(
         )
     try:
         planned = plan() if plan is not None else plan_from_config(route, checkpoints_xy)
+    except FieldPathError:
+        raise
     except ValueError:
         raise FieldPathError(
             ("route", "waypoints"),

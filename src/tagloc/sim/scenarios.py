@@ -196,17 +196,26 @@ SCENARIOS: dict[str, ScenarioSpec] = {
         "20 rides of the tower's mirrored lift to random floors (a seeded schedule): the doors "
         "open and close, two passengers pacing in the cab hide its tag part of the time, the "
         "building publishes the lift's door and floor; legged odometry (no motion in a ride)",
-        world="tower", rides=20, passengers=2, elevator_topic=True,
+        world="tower",
+        rides=20,
+        passengers=2,
+        elevator_topic=True,
     ),
     "elevator_imu": ScenarioSpec(
         "the elevator scenario with IMU-fused odometry: each trip gives the odometry a z drift "
         "and a tilt transient",
-        world="tower", rides=20, passengers=2, elevator_topic=True, odometry_imu=True,
+        world="tower",
+        rides=20,
+        passengers=2,
+        elevator_topic=True,
+        odometry_imu=True,
     ),
     "kidnap_floor": ScenarioSpec(
-        "robot carried 140 s further along the tower's route at t = 70 s (odometry unaware): "
+        "robot carried 133.7 s further along the tower's route at t = 70 s (odometry unaware): "
         "from floor 2 to the same spot of floor 0, which looks the same; only the tags tell",
-        world="tower", kidnap_at_s=70.0, kidnap_skip_s=140.0,
+        world="tower",
+        kidnap_at_s=70.0,
+        kidnap_skip_s=133.7,
     ),
 }
 
