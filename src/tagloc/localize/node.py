@@ -62,6 +62,7 @@ from tagloc.localize.source_tags import TagSource
 from tagloc.localize.sources import Arrival, FixContext, FixSource, SkipCounter, SourceInputs
 from tagloc.localize.work_queue import WorkQueue
 from tagloc.messages import (
+    ElevatorStateMsg,
     FrameTruth,
     GroundTruthMsg,
     Message,
@@ -200,6 +201,9 @@ class LocalizerNode:
             self._fusion.set_static(msg.parent, msg.child, msg.T_parent_child)
         elif isinstance(msg, GroundTruthMsg) and topic == t.truth:
             self._emit(msg)
+        elif isinstance(msg, ElevatorStateMsg):  # the building's door news
+            if self._elevators is not None and topic == t.elevator:
+                self._elevators.door(msg.stamp_ns, msg.cab_frame, msg.door_open)
         else:
             for index, source in enumerate(self._sources):
                 arrival = source.arrive(topic, msg)
