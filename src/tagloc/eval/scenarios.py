@@ -16,6 +16,8 @@ import numpy as np
 import numpy.typing as npt
 
 from tagloc.errors import SimulationError
+from tagloc.eval.elevator import RideTruth, elevator_checks
+from tagloc.geometry import SE3
 from tagloc.localize.config import LocalizerConfig
 from tagloc.localize.driver import record_run
 from tagloc.localize.node import LocalizerNode
@@ -34,6 +36,7 @@ from tagloc.units import S_NS
 __all__ = [
     "calibrated_config",
     "localize_scenario",
+    "ride_truth",
     "run_scenario",
     "scenario_config",
     "scenario_metadata",
@@ -125,7 +128,26 @@ def localize_scenario(
     run.kidnaps_ns = list(scenario.kidnaps_ns)
     run.metadata.update(scenario_metadata(scenario, source))
     run.metadata["lidar_used"] = use_lidar
+    if run.cab_moves and scenario.world.has_floors:  # rides: their checks, against the truth
+        run.metadata["ride_checks"] = [list(c) for c in elevator_checks(run, ride_truth(scenario))]
     return run
+
+
+def ride_truth(scenario: Scenario) -> RideTruth:
+    """The simulator's truth of a scenario's rides (:class:`~tagloc.eval.elevator.RideTruth`)."""
+    drive, world = scenario.drive, scenario.world
+    shaft_of = {s.frame: s.name for s in world.shafts()}
+
+    def T_cab_base(cab_frame: str, stamps_ns: np.ndarray) -> SE3:
+        T_map_base = drive.ground_truth_at(stamps_ns).T_map_base
+        T_map_cab = SE3.stack([drive.T_map_cab(int(t), shaft_of[cab_frame]) for t in stamps_ns])
+        return T_map_cab.inverse() @ T_map_base
+
+    def floor_at(stamps_ns: np.ndarray) -> list[str | None]:
+        return [drive.floor_at(int(t)) for t in stamps_ns]
+
+    tag_floor = {t.id: floor for t, floor in world.all_tags() if floor is not None}
+    return RideTruth(T_cab_base, floor_at, tag_floor)
 
 
 def calibrated_config(scenario: Scenario, config: LocalizerConfig) -> LocalizerConfig:

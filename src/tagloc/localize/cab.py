@@ -186,10 +186,10 @@ class Elevators:
         return _replace(estimate, floor=None, cov_map_base=cov)
 
     def estimator_state(self, state: EstimatorState, stamp_ns: int) -> EstimatorState:
-        """What the ladder judges: in a cab with the doors closed the cab's estimate (its tags
-        carry it), else the map's."""
+        """What the ladder judges: in a cab (boarding, riding, alighting) the cab's estimate
+        once it exists (its tags carry it), else the map's."""
         handoff, cab = self._supervisor.handoff, self._cab
-        if handoff is None or handoff.state is not CabState.IN_CAB or cab is None:
+        if handoff is None or not handoff.state.in_cab or cab is None or not cab.initialized:
             return state
         last = self._cab_fix
         since_s = np.inf if last is None else (stamp_ns - last[0]) / S_NS

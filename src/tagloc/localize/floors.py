@@ -51,9 +51,8 @@ def tag_ids_of(source: str) -> tuple[int, ...]:
 def floor_table(tag_map: TagMap, family: str) -> tuple[dict[str, float], dict[int, str]]:
     """The floors' heights (name -> m in ``map``) and the floor of each map-frame tag of
     ``family`` that has one (id -> name); both empty for a map without floors."""
-    table: dict[str, float] = getattr(tag_map, "floors", None) or {}
-    heights = {str(k): float(v) for k, v in table.items()}
-    tags = {t.id: getattr(t, "floor", None) for t in tag_map if t.family == family}
+    heights = {str(k): float(v) for k, v in (tag_map.floors or {}).items()}
+    tags = {t.id: t.floor for t in tag_map if t.family == family and t.floor is not None}
     return heights, {k: str(v) for k, v in tags.items() if v is not None}
 
 

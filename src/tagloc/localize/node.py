@@ -63,6 +63,7 @@ from tagloc.localize.sources import Arrival, FixContext, FixSource, SkipCounter,
 from tagloc.localize.tag_cameras import NodeCamera
 from tagloc.localize.work_queue import WorkQueue
 from tagloc.messages import (
+    ElevatorStateMsg,
     FrameTruth,
     GroundTruthMsg,
     Message,
@@ -211,6 +212,9 @@ class LocalizerNode:
             self._fusion.set_static(msg.parent, msg.child, msg.T_parent_child)
         elif isinstance(msg, GroundTruthMsg) and topic == t.truth:
             self._emit(msg)
+        elif isinstance(msg, ElevatorStateMsg):  # the building's door news
+            if self._elevators is not None and topic == t.elevator:
+                self._elevators.door(msg.stamp_ns, msg.cab_frame, msg.door_open)
         else:
             for index, source in enumerate(self._sources):
                 arrival = source.arrive(topic, msg)

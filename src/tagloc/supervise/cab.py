@@ -53,8 +53,6 @@ class ElevatorConfig(StrictModel):
     #: Frames of the tag map that are elevator cabs (tags inside a cab, posed in its frame). A
     #: tag map with a frame that is neither the map frame nor listed here is refused at start-up.
     cab_frames: tuple[str, ...] = Field(("elevator_cab",), max_length=100)
-    #: The building's door topic (``ElevatorStateMsg``); without messages the doors are inferred.
-    door_topic: str = Field("/elevator/state", min_length=1, max_length=200)
     #: Cab tags seen over this long (no gap above ``lost_s``): the robot is boarding.
     board_dwell_s: float = Field(0.5, ge=0, le=60)
     #: Inferred doors: cab tags seen and no map-frame tag for this long: the doors are closed.
