@@ -104,8 +104,11 @@ def test_dupont_camera_passes_the_check(tmp_path: Path) -> None:
     done = run_tagloc("localize", str(bag), "--tags", str(tags), *common, "--detections-topic",
                       "/fla/ovc_node/left/tags", "--no-bag", "--out", str(out))  # fmt: skip
     assert done.returncode == 0, done.stderr
-    check = json.loads((out / "summary.json").read_text())["camera_check"]
-    assert check["problems"] == [] and check["n_pairs"] >= 5 and abs(check["pnp_scale"] - 1) < 0.1
+    checks = json.loads((out / "summary.json").read_text())["camera_check"]  # by camera: a rig
+    assert sorted(checks) == ["cam0", "cam1"]
+    for check in checks.values():
+        assert check["problems"] == [] and check["n_pairs"] >= 5
+        assert abs(check["pnp_scale"] - 1) < 0.1
 
 
 def test_eval_bag_checks_its_output_before_any_work(sim_bag: Path, tmp_path: Path) -> None:

@@ -80,6 +80,7 @@ positive_int = in_range(ge=1)
 SCENARIO_NAMES = (
     "default", "kidnap", "kidnap_one_tag", "glint", "moved_tag", "corridor", "dropout",
     "camera_unplugged", "odometry_stall", "clock_jump_back", "duplicated_messages",
-    "glass_corridor", "mirrored_lobby", "crowd", "lidar_unplugged", "long_corridor",
+    "glass_corridor", "mirrored_lobby", "crowd", "lidar_unplugged", "long_corridor", "elevator",
+    "elevator_imu", "kidnap_floor",
 )  # fmt: skip
 SCENARIO_HELP = "Simulated scenario: " + ", ".join(SCENARIO_NAMES) + "."
