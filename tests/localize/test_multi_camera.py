@@ -13,13 +13,14 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
+from list_sink import ListSink
 
 from tagloc.eval.refusals import fix_decisions
 from tagloc.eval.scenarios import calibrated_config, scenario_config
 from tagloc.geometry import SE3
 from tagloc.localize import LocalizeError
 from tagloc.localize.node import LocalizerNode, NodeCamera
-from tagloc.localize.outputs import Estimate, NodeOutput
+from tagloc.localize.outputs import Estimate
 from tagloc.localize.run import FixAttempt
 from tagloc.messages import Message, TagDetectionsMsg
 from tagloc.sim.scenarios import ScenarioSource, build_scenario
@@ -31,17 +32,6 @@ UNIT = np.array([[-0.5, 0.5, 0.0], [0.5, 0.5, 0.0], [0.5, -0.5, 0.0], [-0.5, -0.
 
 
 Rig = tuple[ScenarioSource, SE3, dict[int, list[TagDetection]], list[tuple[str, Message]]]
-
-
-class ListSink:
-    def __init__(self) -> None:
-        self.outputs: list[NodeOutput] = []
-
-    def write(self, output: NodeOutput) -> None:
-        self.outputs.append(output)
-
-    def of(self, kind: type) -> list:  # type: ignore[type-arg]
-        return [o for o in self.outputs if isinstance(o, kind)]
 
 
 def _matrix(T: SE3) -> np.ndarray:

@@ -6,29 +6,19 @@ import itertools
 
 import numpy as np
 import pytest
+from list_sink import ListSink
 
 from tagloc.errors import ConfigError
 from tagloc.eval.scenarios import calibrated_config, scenario_config
 from tagloc.geometry import SE3
 from tagloc.localize import LocalizerConfig
 from tagloc.localize.node import LocalizerNode
-from tagloc.localize.outputs import Estimate, NodeOutput
+from tagloc.localize.outputs import Estimate
 from tagloc.messages import OdometryMsg, TransformMsg
 from tagloc.sim.scenarios import ScenarioSource, build_scenario
 from tagloc.supervise import LadderTransition, StatusReport
 
 S = 1_000_000_000
-
-
-class ListSink:
-    def __init__(self) -> None:
-        self.outputs: list[NodeOutput] = []
-
-    def write(self, output: NodeOutput) -> None:
-        self.outputs.append(output)
-
-    def of(self, kind: type) -> list:  # type: ignore[type-arg]
-        return [o for o in self.outputs if isinstance(o, kind)]
 
 
 @pytest.fixture(scope="module")
