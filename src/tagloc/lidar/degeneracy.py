@@ -95,12 +95,7 @@ def analyse_hessian(hessian: npt.ArrayLike, config: DegeneracyConfig) -> Degener
     vectors = np.zeros((6, 6))
     constrained = np.zeros(6, dtype=bool)
     for block, other in ((slice(0, 3), slice(3, 6)), (slice(3, 6), slice(0, 3))):
-        schur = (
-            H[block, block]
-            - H[block, other]
-            @ np.linalg.pinv(H[other, other], rcond=1e-9, hermitian=True)
-            @ H[other, block]
-        )
+        schur = H[block, block] - H[block, other] @ _pinv_psd(H[other, other]) @ H[other, block]
         w, v = np.linalg.eigh(0.5 * (schur + schur.T))
         w = np.clip(w, 0.0, None)
         values[block], vectors[block, block] = w, v
@@ -109,3 +104,16 @@ def analyse_hessian(hessian: npt.ArrayLike, config: DegeneracyConfig) -> Degener
             w > config.min_information
         )
     return Degeneracy(values, vectors, constrained)
+
+
+def _pinv_psd(A: np.ndarray) -> np.ndarray:
+    """Pseudo-inverse of a small symmetric matrix: eigenvalues below ``1e-9`` of the largest
+    in magnitude count as zero (``np.linalg.pinv(A, rcond=1e-9, hermitian=True)``, without its
+    general-purpose checks)."""
+    w, v = np.linalg.eigh(A)
+    magnitude = np.abs(w)
+    keep = magnitude > 1e-9 * magnitude.max()
+    inverse = np.zeros_like(w)
+    inverse[keep] = 1.0 / w[keep]
+    out: np.ndarray = (v * inverse) @ v.T
+    return out

@@ -173,6 +173,8 @@ def _in_range(points_base: npt.ArrayLike, config: LidarFixConfig) -> np.ndarray:
         raise GeometryError(f"points_base must have shape (N, 3), got {array.shape}")
     squared = np.einsum("ij,ij->i", array, array, dtype=np.float64)
     keep = (squared >= config.min_range_m**2) & (squared <= config.max_range_m**2)
+    if keep.all():  # every point in range: no copy
+        return np.asarray(array, dtype=np.float64)
     return np.asarray(array[keep], dtype=np.float64)
 
 

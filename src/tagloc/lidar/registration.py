@@ -221,29 +221,27 @@ def _point_to_plane(
     App. D: ``d(T p)/d xi = [R, -R [p]x]``).
     """
     moved = T_target_source.act(points_source)
-    index, sq_dist = target._tree.batch_nearest_neighbor_search(moved, config.num_threads)
-    index, sq_dist = np.asarray(index).reshape(-1), np.asarray(sq_dist).reshape(-1)
-    inlier = (index >= 0) & (sq_dist <= config.max_correspondence_m**2)
+    # k-NN with k = 1 is the nearest-neighbour search returning arrays (not Python lists)
+    index, sq_dist = target._tree.batch_knn_search(moved, 1, config.num_threads)
+    inlier = sq_dist[:, 0] <= config.max_correspondence_m**2  # none found: an infinite distance
     if not inlier.any():
         return np.zeros((6, 6)), np.zeros((6, 6)), float("nan"), float("nan"), 0
-    nearest = index[inlier]
+    nearest = index[inlier, 0]
     normals_target = target.normals[nearest]
     distance = np.einsum("ij,ij->i", moved[inlier] - target.points[nearest], normals_target)
-    normals_source = T_target_source.rotation.inverse().act(normals_target)
-    p, n = points_source[inlier], normals_source
-    gradient = np.column_stack(
-        [
-            n,
-            p[:, 1] * n[:, 2] - p[:, 2] * n[:, 1],
-            p[:, 2] * n[:, 0] - p[:, 0] * n[:, 2],
-            p[:, 0] * n[:, 1] - p[:, 1] * n[:, 0],
-        ]
-    )  # [n, p x n]
+    n = normals_target @ T_target_source.rotation.matrix  # R^T n, row by row
+    p = points_source[inlier]
+    gradient = np.empty((len(p), 6))
+    gradient[:, :3] = n
+    gradient[:, 3] = p[:, 1] * n[:, 2] - p[:, 2] * n[:, 1]
+    gradient[:, 4] = p[:, 2] * n[:, 0] - p[:, 0] * n[:, 2]
+    gradient[:, 5] = p[:, 0] * n[:, 1] - p[:, 1] * n[:, 0]  # [n, p x n]
+    absolute = np.abs(distance)
     rmse = float(np.sqrt(np.mean(distance**2)))
-    sigma = float(1.4826 * np.median(np.abs(distance)))
-    clipped = np.minimum(np.abs(distance), 3.0 * sigma)
+    sigma = float(1.4826 * np.median(absolute))
+    clipped = np.minimum(absolute, 3.0 * sigma)
     scatter = (gradient * clipped[:, None] ** 2).T @ gradient
-    return gradient.T @ gradient, scatter, rmse, sigma, int(np.count_nonzero(inlier))
+    return gradient.T @ gradient, scatter, rmse, sigma, len(p)
 
 
 def _empty(T_target_source: SE3) -> Registration:
