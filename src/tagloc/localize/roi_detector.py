@@ -26,7 +26,7 @@ from __future__ import annotations
 import logging
 from collections import Counter
 from collections.abc import Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
@@ -65,14 +65,9 @@ class RegionStats:
     def total(cls, parts: Iterable[RegionStats]) -> RegionStats:
         """The counts of several cameras summed."""
         out = cls()
-        for p in parts:
-            out.frames_regions += p.frames_regions
-            out.frames_full.update(p.frames_full)
-            out.regions += p.regions
-            out.region_area_fraction_sum += p.region_area_fraction_sum
-            out.tags_regions += p.tags_regions
-            out.tags_full += p.tags_full
-            out.tags_missed += p.tags_missed
+        for p in parts:  # every field is a count (the reasons' Counter adds too)
+            for f in fields(cls):
+                setattr(out, f.name, getattr(out, f.name) + getattr(p, f.name))
         return out
 
     def to_dict(self) -> dict[str, Any]:
