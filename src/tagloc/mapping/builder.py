@@ -81,7 +81,8 @@ from tagloc.mapping.report import BuildReport
 from tagloc.mapping.scan_factors import RelativePoseFactors, scan_scale
 from tagloc.mapping.scan_odometry import scan_odometry
 from tagloc.mapping.survey import MappingError, Survey, TagKey
-from tagloc.tags.tagmap import DEFAULT_FAMILY, TagMap
+from tagloc.tags.tagmap import TagMap
+from tagloc.tags.tagmap_checks import DEFAULT_FAMILY
 
 logger = logging.getLogger(__name__)
 

@@ -26,7 +26,8 @@ from tagloc.mapping.report import BuildReport, TagQA, tag_sigmas
 from tagloc.mapping.residuals import corner_residuals_px, observation_rms_px, rms
 from tagloc.mapping.scan_factors import RelativePoseFactors
 from tagloc.mapping.survey import Survey
-from tagloc.tags.tagmap import TagEntry, TagMap
+from tagloc.tags.tag_entry import TagEntry
+from tagloc.tags.tagmap import TagMap
 
 
 def graph_records(

@@ -30,7 +30,7 @@ from tagloc.mapping.survey_scans import SurveyScans
 from tagloc.messages import Message, OdometryMsg, PointCloudMsg, TagDetectionsMsg, TransformMsg
 from tagloc.tags.detection import TagDetection
 from tagloc.tags.pnp import estimate_tag_poses
-from tagloc.tags.tagmap import DEFAULT_FAMILY
+from tagloc.tags.tagmap_checks import DEFAULT_FAMILY
 
 __all__ = [
     "RigConfig", "TagRemap", "corner_rotation_by_gravity", "parse_camera_poses", "parse_tagslam",

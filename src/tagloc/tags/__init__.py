@@ -66,14 +66,9 @@ from tagloc.tags.pnp import (
     estimate_tag_pose,
     estimate_tag_poses,
 )
-from tagloc.tags.tagmap import (
-    TagEntry,
-    TagMap,
-    TagMapError,
-    TagMapLookupError,
-    load_tag_map,
-    save_tag_map,
-)
+from tagloc.tags.tag_entry import TagEntry
+from tagloc.tags.tagmap import TagMap, load_tag_map, save_tag_map
+from tagloc.tags.tagmap_checks import TagMapError, TagMapLookupError
 from tagloc.tags.tagmap_diff import (
     TagChange,
     TagMapDiff,

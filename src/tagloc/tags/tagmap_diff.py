@@ -27,7 +27,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tagloc.tags.tagmap import TagEntry, TagMap
+from tagloc.tags.tag_entry import TagEntry
+from tagloc.tags.tagmap import TagMap
 
 #: Order of the lines of one tag in the formatted diff.
 #: A move whose Mahalanobis norm exceeds this is beyond the maps' combined uncertainty
