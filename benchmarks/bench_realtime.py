@@ -53,15 +53,9 @@ from tagloc.messages import (
     TransformMsg,
 )
 from tagloc.sim import load_default_world, render_frames
-from tagloc.sim.scenarios import (
-    BASE_FRAME,
-    CAMERA_FRAME,
-    MAP_FRAME,
-    ODOM_FRAME,
-    TF_STATIC,
-    Scenario,
-    build_scenario,
-)
+from tagloc.sim.scenario import Scenario
+from tagloc.sim.scenario_source import BASE_FRAME, CAMERA_FRAME, MAP_FRAME, ODOM_FRAME, TF_STATIC
+from tagloc.sim.scenarios import build_scenario
 from tagloc.tags import make_detector
 
 SEED = 1

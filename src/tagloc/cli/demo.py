@@ -159,7 +159,8 @@ def run_demo(
     from tagloc.fileutil import atomic_write_text, check_outputs
     from tagloc.io import write_tum
     from tagloc.sim import load_default_world, load_world
-    from tagloc.sim.scenarios import ScenarioSource, build_scenario
+    from tagloc.sim.scenario_source import ScenarioSource
+    from tagloc.sim.scenarios import build_scenario
 
     check_outputs({"--out": out}, directories={"--out": DEMO_FILES}, inputs={"--world": world_path})
     console = Console()

@@ -67,7 +67,8 @@ def sim_record(
     check_bag_target(out, bag_format)
 
     from tagloc.cli.localize_cmd import write_stream_bag
-    from tagloc.sim.scenarios import ScenarioSource, build_scenario
+    from tagloc.sim.scenario_source import ScenarioSource
+    from tagloc.sim.scenarios import build_scenario
 
     built = build_scenario(scenario, seed, duration)
     source = ScenarioSource(built)

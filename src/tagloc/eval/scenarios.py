@@ -23,13 +23,9 @@ from tagloc.localize.driver import record_run
 from tagloc.localize.node import LocalizerNode
 from tagloc.localize.outputs import OutputSink
 from tagloc.localize.run import LocalizationRun
-from tagloc.sim.scenarios import (
-    SCENARIOS,
-    Scenario,
-    ScenarioSource,
-    build_scenario,
-    scenario_premap,
-)
+from tagloc.sim.scenario import Scenario, scenario_premap
+from tagloc.sim.scenario_source import ScenarioSource
+from tagloc.sim.scenarios import SCENARIOS, build_scenario
 from tagloc.tags.covariance import NoiseModel
 from tagloc.units import S_NS
 

@@ -29,45 +29,31 @@ Every scenario streams the lidar when its world's robot has one (all built-in wo
 the scenario's people.
 
 Pure: the same name, seed and duration give the same scenario. This module is the scenario's
-*source* only; running the localizer on a scenario is :mod:`tagloc.eval.scenarios`'.
+*source* only; running the localizer on a scenario is :mod:`tagloc.eval.scenarios`'. The built
+scenario is :mod:`tagloc.sim.scenario`'s, its stream :mod:`tagloc.sim.scenario_source`'s, the
+kidnap's splice and the truncation of a drive :mod:`tagloc.sim.drive_edits`'.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-import numpy.typing as npt
 
 from tagloc.config import short_repr
 from tagloc.errors import SimulationError
-from tagloc.geometry import SE3
-from tagloc.messages import (
-    CameraInfoMsg,
-    ElevatorStateMsg,
-    GroundTruthMsg,
-    Message,
-    NodeTopics,
-    OdometryMsg,
-    PointCloudMsg,
-    TagDetectionsMsg,
-    TransformMsg,
-)
+from tagloc.messages import OdometryMsg, PointCloudMsg, TagDetectionsMsg
 from tagloc.sim.drive import Drive, simulate_drive
-from tagloc.sim.elevator_stream import elevator_messages
-from tagloc.sim.faults import ClockJump, DropMessages, DuplicateMessages, StreamFault, apply_faults
-from tagloc.sim.frame_truth import FrameTruthMap
-from tagloc.sim.lidar import LIDAR_FRAME, LidarSimulator, Sweep, premap_from_world
-from tagloc.sim.lidar_floors import lidar_for_drive
-from tagloc.sim.observations import ObservationConfig, ObservedFrame, simulate_observations
+from tagloc.sim.drive_edits import SplicedDrive, _splice, truncate_drive
+from tagloc.sim.faults import ClockJump, DropMessages, DuplicateMessages, StreamFault
+from tagloc.sim.observations import ObservationConfig
 from tagloc.sim.odometry_ride import ImuFusionConfig
 from tagloc.sim.people import Person, crowd_around
 from tagloc.sim.ride_schedule import pacing_passengers, random_ride_route
-from tagloc.sim.trajectory import Trajectory
+from tagloc.sim.scenario import Scenario, scenario_premap, tag_map_from_world
+from tagloc.sim.scenario_source import ScenarioSource
 from tagloc.sim.world import WallMount, World, load_builtin_world, load_default_world
-from tagloc.tags.tagmap import TagEntry, TagMap
 from tagloc.units import S_NS
 
 __all__ = [
@@ -81,12 +67,6 @@ __all__ = [
     "tag_map_from_world",
     "truncate_drive",
 ]
-
-MAP_FRAME, ODOM_FRAME, BASE_FRAME, CAMERA_FRAME = "map", "odom", "base_link", "camera_optical"
-TF_STATIC = "/tf_static"
-#: Odometry covariance written with the simulated odometry (informational; the filter's process
-#: noise is configured in ``localizer.yaml``).
-_ODOM_COV = np.diag(np.square([0.02, 0.02, 0.01, 0.005, 0.005, 0.02]))
 
 
 @dataclass(frozen=True, slots=True)
@@ -220,107 +200,6 @@ SCENARIOS: dict[str, ScenarioSpec] = {
 }
 
 
-@dataclass(frozen=True, slots=True)
-class SplicedDrive(Drive):
-    """A drive whose ground truth skips ``skip_ns`` of the route from ``kidnap_ns`` on."""
-
-    kidnap_ns: int = 0
-    skip_ns: int = 0
-
-    def ground_truth_at(self, stamps_ns: npt.NDArray[np.int64]) -> Trajectory:
-        """Truth at ``stamps_ns``: the route's, shifted by ``skip_ns`` from the kidnap on."""
-        stamps = np.asarray(stamps_ns, dtype=np.int64)
-        shifted = np.where(stamps >= self.kidnap_ns, stamps + self.skip_ns, stamps)
-        return self.plan.sample(shifted, self.t0_ns)
-
-    def route_s(self, stamps_ns: npt.ArrayLike) -> npt.NDArray[np.float64]:
-        """Route time at ``stamps_ns``, shifted by ``skip_ns`` from the kidnap on."""
-        stamps = np.atleast_1d(np.asarray(stamps_ns, dtype=np.int64))
-        shifted = np.where(stamps >= self.kidnap_ns, stamps + self.skip_ns, stamps)
-        return (shifted - np.int64(self.t0_ns)).astype(np.float64) * 1e-9
-
-
-@dataclass(frozen=True, slots=True)
-class Scenario:
-    """Everything a run of one scenario needs.
-
-    Attributes
-    ----------
-    name : str
-    drive : Drive
-        Odometry and truth (truth spliced for a kidnap).
-    observation : ObservationConfig
-    world : World
-        The world the tags really are in (observations come from it).
-    tag_map : TagMap
-        The map the localizer is given (from the world as surveyed).
-    camera_stamps_ns : (M,) int64
-        Frames that exist (dropout removes some).
-    kidnaps_ns : list of int
-    faults : tuple of StreamFault
-        Applied to the stream by :class:`ScenarioSource` (empty: the clean stream).
-    """
-
-    name: str
-    drive: Drive
-    observation: ObservationConfig
-    world: World
-    tag_map: TagMap
-    camera_stamps_ns: npt.NDArray[np.int64]
-    kidnaps_ns: list[int]
-    faults: tuple[StreamFault, ...] = ()
-    #: Lidar occluders: the world's people and the scenario's crowd.
-    people: tuple[Person, ...] = ()
-    #: The building publishes its elevators' state (:func:`~tagloc.sim.elevator_stream.
-    #: elevator_messages`, on ``topics.elevator``).
-    elevator_topic: bool = False
-
-
-def tag_map_from_world(world: World) -> TagMap:
-    """The surveyed tag map of ``world``. A single-floor world: every tag's pose in ``map`` (cab
-    tags included, the cab standing still). A world with floors: each floor's tags in ``map`` (z
-    above that floor's height) with their ``floor``, each cab's tags in its cab's frame (listed in
-    ``frames``), and the ``floors`` table."""
-    if not world.has_floors:
-        return TagMap.from_entries(
-            TagEntry.from_pose(t.id, world.T_map_tag(t), t.size, family=t.family,
-                               note=t.note or "")
-            for t in world.tags
-        )  # fmt: skip
-    entries = [
-        TagEntry.from_pose(
-            t.id,
-            world.T_map_tag(t) if floor is not None else t.T_frame_tag(),
-            t.size,
-            family=t.family,
-            note=t.note or "",
-            frame=t.frame,
-            floor=floor,
-        )
-        for t, floor in world.all_tags()
-    ]
-    frames = ["map", *(s.frame for s in world.shafts())]
-    return TagMap.from_entries(entries, frames=frames, floors=world.floor_heights())
-
-
-def scenario_premap(
-    scenario: Scenario, *, every_m: float = 0.5, voxel_m: float = 0.1
-) -> npt.NDArray[np.float64]:
-    """The true lidar premap of a scenario, as :func:`tag_map_from_world` is its true tag map:
-    :func:`~tagloc.sim.lidar.premap_from_world` of the world along the drive's ground truth
-    (scans every ``every_m`` of travel, no people, no noise; ``voxel_m`` cubes), ``(N, 3)`` in
-    ``map``, metres.
-
-    Raises
-    ------
-    ValueError
-        If the world's robot has no lidar.
-    """
-    return premap_from_world(
-        scenario.world, scenario.drive.T_map_base, every_m=every_m, voxel_m=voxel_m
-    )
-
-
 def build_scenario(
     name: str,
     seed: int = 0,
@@ -423,151 +302,3 @@ def _move_tags(world: World, moves: dict[int, tuple[float, float]]) -> World:
             tag = tag.model_copy(update={"wall": wall})
         tags.append(tag)
     return world.model_copy(update={"tags": tuple(tags)})
-
-
-def _splice(drive: Drive, kidnap_at_s: float, skip_s: float) -> SplicedDrive:
-    """Truth from ``kidnap_at`` on is the route ``skip_s`` later; odometry keeps its own path
-    (the increments of the skipped-to stretch) without a jump."""
-    step = int(drive.stamps_ns[1] - drive.stamps_ns[0])
-    k = int(np.searchsorted(drive.stamps_ns, drive.t0_ns + round(kidnap_at_s * S_NS)))
-    skip = round(skip_s * S_NS / step)
-    n = len(drive.stamps_ns) - skip
-    if k >= n:
-        raise SimulationError(f"kidnap at {kidnap_at_s} s + {skip_s} s is past the drive's end")
-    idx = np.concatenate([np.arange(k), np.arange(k, n) + skip])
-    T_odom = drive.T_odom_base
-    T_odom_after = T_odom[k - 1] @ T_odom[k - 1 + skip].inverse() @ T_odom[idx[k:]]
-    T_odom_base = SE3.stack([*T_odom[:k], *T_odom_after])
-    stamps = drive.stamps_ns[:n]
-    cams = drive.camera_stamps_ns[drive.camera_stamps_ns <= stamps[-1]]
-    return SplicedDrive(
-        world=drive.world, stamps_ns=stamps, T_map_base=drive.T_map_base[idx],
-        T_odom_base=T_odom_base, camera_stamps_ns=cams, distance_m=drive.distance_m[idx],
-        trajectory=drive.trajectory, plan=drive.plan, t0_ns=drive.t0_ns, seed=drive.seed,
-        kidnap_ns=int(stamps[k]), skip_ns=skip * step,
-    )  # fmt: skip
-
-
-def truncate_drive(drive: Drive, duration_s: float) -> Drive:
-    """The first ``duration_s`` seconds of ``drive`` (odometry, truth and camera stamps)."""
-    end = drive.t0_ns + round(duration_s * S_NS)
-    n = int(np.searchsorted(drive.stamps_ns, end, side="right"))
-    return replace(
-        drive,
-        stamps_ns=drive.stamps_ns[:n],
-        T_map_base=drive.T_map_base[:n],
-        T_odom_base=drive.T_odom_base[:n],
-        camera_stamps_ns=drive.camera_stamps_ns[drive.camera_stamps_ns <= drive.stamps_ns[n - 1]],
-        distance_m=drive.distance_m[:n],
-    )
-
-
-class ScenarioSource:
-    """A scenario as a :class:`~tagloc.messages.MessageSource` (the simulator's stream).
-
-    Yields, in arrival order: the camera's ``CameraInfoMsg`` and the static ``base -> camera``
-    transform at the start (and ``base -> lidar`` when the robot has a lidar), then per odometry
-    stamp an ``OdometryMsg`` and a ``GroundTruthMsg``, per camera frame a ``TagDetectionsMsg``
-    (before the odometry of the same stamp, as a bag's log-time order has it) and per lidar
-    sweep a ``PointCloudMsg`` on ``topics.lidar`` (stamped at the sweep's start, delivered at its
-    end: the time of its last point, ``last_point_ns()``, also the log time
-    :class:`~tagloc.io.BagSink` gives it; simulated lazily as the stream is read:
-    :mod:`tagloc.sim.lidar`); then the scenario's ``faults`` rewrite that stream.
-    :attr:`frame_truth` holds what only the simulator knows (glints, tags truly in view).
-    Camera frames are simulated as the stream is read, and only the recent frames' truth is
-    kept (:class:`~tagloc.sim.frame_truth.FrameTruthMap`): memory does not grow with the drive.
-    """
-
-    def __init__(
-        self, scenario: Scenario, topics: NodeTopics | None = None, lidar: bool = True
-    ) -> None:
-        """``lidar``: False leaves the sweeps out even when the robot has a lidar (a run that
-        ignores them need not simulate them: 4 ms of CPU per sweep)."""
-        self.scenario, self.t = scenario, topics or NodeTopics()
-        drive = scenario.drive
-        self.frame_truth = FrameTruthMap(scenario.camera_stamps_ns, self._observe)
-        self.glints_injected = 0  # false detections streamed so far
-        robot = scenario.world.robot
-        self.camera = robot.camera.camera_model()
-        self.T_base_cam = robot.camera.T_base_cam.T_base_cam()
-        self.lidar: LidarSimulator | None = None
-        if robot.lidar is not None and lidar:
-            self.lidar = lidar_for_drive(robot.lidar, scenario.world, scenario.people, drive)
-
-    def _observe(self, stamps_ns: npt.NDArray[np.int64]) -> Iterator[ObservedFrame]:
-        scenario = self.scenario
-        return simulate_observations(
-            scenario.drive, scenario.observation, stamps_ns=stamps_ns, world=scenario.world
-        )
-
-    @property
-    def n_frames(self) -> int:
-        """Camera frames the stream holds."""
-        return len(self.scenario.camera_stamps_ns)
-
-    @property
-    def frames(self) -> list[ObservedFrame]:
-        """Every camera frame of the drive, simulated again (the whole drive in memory)."""
-        return list(self._observe(self.scenario.camera_stamps_ns))
-
-    @property
-    def topics(self) -> dict[str, type[Message]]:
-        """Stream topic -> record type."""
-        t = self.t
-        topics: dict[str, type[Message]] = {
-            t.odom: OdometryMsg, t.truth: GroundTruthMsg, t.detections: TagDetectionsMsg,
-            t.camera_info: CameraInfoMsg, TF_STATIC: TransformMsg,
-        }  # fmt: skip
-        if self.lidar is not None:
-            topics[t.lidar] = PointCloudMsg
-        if self.scenario.elevator_topic:
-            topics[t.elevator] = ElevatorStateMsg
-        return topics
-
-    def __iter__(self) -> Iterator[tuple[str, Message]]:
-        t0 = int(self.scenario.drive.stamps_ns[0])
-        return apply_faults(self._clean(), self.scenario.faults, t0)
-
-    def _clean(self) -> Iterator[tuple[str, Message]]:
-        drive, t = self.scenario.drive, self.t
-        t0 = int(drive.stamps_ns[0])
-        yield t.camera_info, CameraInfoMsg(t0, CAMERA_FRAME, self.camera.to_camera_info())
-        yield TF_STATIC, TransformMsg(t0, BASE_FRAME, CAMERA_FRAME, self.T_base_cam, static=True)
-        self.glints_injected = 0
-        sweeps: Iterator[Sweep] = iter(())
-        if self.lidar is not None:
-            T_base_lidar = self.lidar.T_base_lidar
-            yield TF_STATIC, TransformMsg(t0, BASE_FRAME, LIDAR_FRAME, T_base_lidar, static=True)
-            starts = self.lidar.sweep_starts_ns(t0, int(drive.stamps_ns[-1]))
-            sweeps = self.lidar.sweeps(lambda st: drive.ground_truth_at(st).xy_yaw_map_base, starts)
-        sweep = next(sweeps, None)
-        frames = self._observe(self.scenario.camera_stamps_ns)
-        frame = next(frames, None)
-        building = iter(elevator_messages(drive) if self.scenario.elevator_topic else ())
-        state = next(building, None)
-        for i, stamp in enumerate(drive.stamps_ns.tolist()):
-            while state is not None and state.stamp_ns <= stamp:  # the building's elevators
-                yield t.elevator, state
-                state = next(building, None)
-            # frames arrive at their stamp, sweeps when complete, before the odometry of a stamp
-            while True:
-                t_frame = frame.stamp_ns if frame is not None else stamp + 1
-                t_sweep = sweep.msg.last_point_ns() if sweep is not None else stamp + 1
-                if min(t_frame, t_sweep) > stamp:
-                    break
-                if t_frame <= t_sweep:
-                    assert frame is not None
-                    self.frame_truth.record(frame)
-                    self.glints_injected += sum(frame.false_detection)
-                    yield (
-                        t.detections,
-                        TagDetectionsMsg(frame.stamp_ns, CAMERA_FRAME, frame.detections),
-                    )
-                    frame = next(frames, None)
-                else:
-                    assert sweep is not None
-                    yield t.lidar, sweep.msg
-                    sweep = next(sweeps, None)
-            T = drive.T_odom_base[i]
-            yield t.odom, OdometryMsg(stamp, ODOM_FRAME, BASE_FRAME, T, _ODOM_COV)
-            yield t.truth, GroundTruthMsg(stamp, MAP_FRAME, drive.T_map_base[i])
