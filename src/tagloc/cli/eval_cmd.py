@@ -24,7 +24,7 @@ if TYPE_CHECKING:
 
     from rich.table import Table
 
-    from tagloc.eval.summary import Check, EvalSummary
+    from tagloc.eval.summary_types import Check, EvalSummary
 
 eval_app = typer.Typer(
     help="Evaluate: localization runs against ground truth, the tag sensor by sweep.",

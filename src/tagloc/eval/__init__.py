@@ -10,7 +10,8 @@ from tagloc.eval.metrics import TrajectoryError, absolute_trajectory_error, endp
 from tagloc.eval.protocol import EvalConfig, KidnapRecovery, Reliability
 from tagloc.eval.report import export_tum, write_report
 from tagloc.eval.rpe import RelativeError, relative_pose_error, relative_pose_error_per_time
-from tagloc.eval.summary import EstimatorScore, EvalSummary, Evaluation, evaluate, summary_to_dict
+from tagloc.eval.summary import evaluate, summary_to_dict
+from tagloc.eval.summary_types import EstimatorScore, EvalSummary, Evaluation
 
 __all__ = [
     "Alignment",

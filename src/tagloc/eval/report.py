@@ -29,7 +29,8 @@ from tagloc.eval.protocol import EvalConfig
 from tagloc.eval.report_style import CSS as _CSS
 from tagloc.eval.report_style import figure as _img
 from tagloc.eval.report_style import table as _table
-from tagloc.eval.summary import EvalSummary, Evaluation, evaluate, summary_to_dict
+from tagloc.eval.summary import evaluate, summary_to_dict
+from tagloc.eval.summary_types import EvalSummary, Evaluation
 from tagloc.fileutil import atomic_write_text
 from tagloc.geometry import SE3
 from tagloc.localize.run import LocalizationRun

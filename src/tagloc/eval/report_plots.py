@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from tagloc.eval.fixstats import AcceptanceBin
-from tagloc.eval.summary import Evaluation
+from tagloc.eval.summary_types import Evaluation
 from tagloc.fileutil import atomic_path
 
 COLORS = {"truth": "tab:green", "odometry": "tab:red", "fused": "tab:blue", "baseline": "0.45"}

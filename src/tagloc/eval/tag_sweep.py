@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tagloc.eval.summary import Check
+from tagloc.eval.summary_types import Check
 from tagloc.eval.tag_sweep_config import TagSweepConfig
 from tagloc.eval.tag_sweep_joint import JointRow, joint_cell, joint_checks
 from tagloc.eval.tag_sweep_stats import (

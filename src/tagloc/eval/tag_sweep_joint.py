@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tagloc.eval.summary import Check
+from tagloc.eval.summary_types import Check
 from tagloc.eval.tag_sweep_stats import percentile_or_nan
 from tagloc.eval.tag_views import SweepStack, pose_prior, rotation_error_deg, sample_board_view
 from tagloc.sim.render import render_tags_scene

@@ -25,7 +25,7 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
-from tagloc.eval.summary import Check
+from tagloc.eval.summary_types import Check
 from tagloc.eval.tag_sweep import JointRow, TagSweepResult
 from tagloc.eval.tag_sweep_config import save_tag_sweep_config
 from tagloc.eval.tag_sweep_plots import plot_tag_sweep_errors, plot_tag_sweep_rates

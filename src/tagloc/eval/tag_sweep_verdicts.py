@@ -22,7 +22,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from tagloc.eval.summary import Check
+from tagloc.eval.summary_types import Check
 from tagloc.eval.tag_sweep_config import TagSweepConfig
 from tagloc.eval.tag_sweep_stats import POSE_DOF, TagSweepRow, pooled_nees_per_dof
 
