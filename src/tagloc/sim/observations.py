@@ -147,62 +147,62 @@ def simulate_observations(
     stamps = drive.camera_stamps_ns if stamps_ns is None else np.asarray(stamps_ns, np.int64)
     T_base_cam = world.robot.camera.T_base_cam.T_base_cam()
     if isinstance(drive.plan, RidePlan):
-        return _floor_frames(drive, world, camera, config, stamps, T_base_cam)
+        return _frames(drive, _FloorTags(world, drive.plan), camera, config, stamps, T_base_cam)
     return _frames(drive, _world_tags(world), camera, config, stamps, T_base_cam)
 
 
-def _floor_frames(
-    drive: Drive,
-    world: World,
-    camera: CameraModel,
-    config: ObservationConfig,
-    stamps: npt.NDArray[np.int64],
-    T_base_cam: SE3,
-) -> Iterator[ObservedFrame]:
-    """:func:`_frames` in a building: each frame sees the scene of its instant
-    (:mod:`tagloc.sim.floor_scene`), people included."""
-    assert isinstance(drive.plan, RidePlan)
-    scenes = SceneCache(world, drive.plan)
-    arrays: dict[tuple[object, ...], _WorldTags] = {}
-    for start in range(0, len(stamps), _CHUNK):
-        chunk = stamps[start : start + _CHUNK]
-        truth = drive.ground_truth_at(chunk)
-        route_s = drive.route_s(chunk)
-        for k, stamp in enumerate(chunk):
-            scene = scenes.at(float(route_s[k]), truth.xy_yaw_map_base[k, :2])
-            tags = arrays.get(scene.key) if scene.floor is not None else None
-            if tags is None:
-                tags = _tags_in([t for t, _ in scene.tags], [T for _, T in scene.tags],
-                                scene.walls)  # fmt: skip
-                if scene.floor is not None:
-                    arrays[scene.key] = tags
-            occluders = None
-            if scene.people:
-                xy = people_xy([p.waypoints() for p in scene.people], route_s[k : k + 1])[0]
-                radius = np.array([p.radius_m for p in scene.people])
-                occluders = np.column_stack([xy, radius])
-            T_map_base = truth.T_map_base[k]
-            T_map_cam = T_map_base @ T_base_cam
-            rng = np.random.default_rng(np.random.SeedSequence([config.seed, int(stamp) % 2**63]))
-            yield _frame(int(stamp), tags, camera, config, T_map_base, T_map_cam, rng, occluders)
+class _FloorTags:
+    """The tags a frame sees in a building: the scene of its instant
+    (:mod:`tagloc.sim.floor_scene`), people included; each floor's arrays made once."""
+
+    def __init__(self, world: World, plan: RidePlan) -> None:
+        self.scenes = SceneCache(world, plan)
+        self.arrays: dict[tuple[object, ...], _WorldTags] = {}
+
+    def at(
+        self, route_s: npt.NDArray[np.float64], xy_map_base: FloatArray
+    ) -> tuple[_WorldTags, FloatArray | None]:
+        """The tags and the occluders (``[x, y, radius]`` rows, or None) at route time
+        ``route_s`` (1,), the robot at ``xy_map_base``."""
+        scene = self.scenes.at(float(route_s[0]), xy_map_base)
+        tags = self.arrays.get(scene.key) if scene.floor is not None else None
+        if tags is None:
+            tags = _tags_in([t for t, _ in scene.tags], [T for _, T in scene.tags],
+                            scene.walls)  # fmt: skip
+            if scene.floor is not None:
+                self.arrays[scene.key] = tags
+        occluders = None
+        if scene.people:
+            xy = people_xy([p.waypoints() for p in scene.people], route_s)[0]
+            radius = np.array([p.radius_m for p in scene.people])
+            occluders = np.column_stack([xy, radius])
+        return tags, occluders
 
 
 def _frames(
     drive: Drive,
-    tags: _WorldTags,
+    tags: _WorldTags | _FloorTags,
     camera: CameraModel,
     config: ObservationConfig,
     stamps: npt.NDArray[np.int64],
     T_base_cam: SE3,
 ) -> Iterator[ObservedFrame]:
+    """The frames at ``stamps``, seeing the world's ``tags`` or, in a building, those of the
+    frame's instant."""
     for start in range(0, len(stamps), _CHUNK):
         chunk = stamps[start : start + _CHUNK]
         truth = drive.ground_truth_at(chunk)
+        route_s = drive.route_s(chunk) if isinstance(tags, _FloorTags) else None
         for k, stamp in enumerate(chunk):
+            if isinstance(tags, _FloorTags):
+                assert route_s is not None
+                seen, occluders = tags.at(route_s[k : k + 1], truth.xy_yaw_map_base[k, :2])
+            else:
+                seen, occluders = tags, None
             T_map_base = truth.T_map_base[k]
             T_map_cam = T_map_base @ T_base_cam
             rng = np.random.default_rng(np.random.SeedSequence([config.seed, int(stamp) % 2**63]))
-            yield _frame(int(stamp), tags, camera, config, T_map_base, T_map_cam, rng)
+            yield _frame(int(stamp), seen, camera, config, T_map_base, T_map_cam, rng, occluders)
 
 
 def _frame(
