@@ -182,6 +182,8 @@ class RerunSink:
                 f"ladder {int(output.from_level)} -> {int(output.to_level)}: {output.reason}"))
 
     def _fix(self, fix: FixAttempt) -> None:
+        if not fix.in_map:  # a fix of a cab's tags is a pose in the cab, not in the map
+            return
         rr = self._rr
         self._time(fix.stamp_ns)
         self._accepted += fix.accepted

@@ -101,13 +101,7 @@ class RunFilesSink:
             self.counts["offered"] += not output.decision.startswith("rejected:")
             self.counts["accepted"] += output.accepted
             self.decisions.add(output)
-            self._json("fixes.jsonl", {
-                "stamp_ns": output.stamp_ns, "source": output.source,
-                "decision": output.decision, "range_m": _num(output.range_m),
-                "view_angle_rad": _num(output.view_angle_rad),
-                "false_detection": output.false_detection,
-                "d2": None if output.d2 is None else _num(output.d2), "camera": output.camera,
-            })  # fmt: skip
+            self._json("fixes.jsonl", output.to_row())
         elif isinstance(output, CameraFrameRecord):
             self.counts["frames"] += 1
         elif isinstance(output, GroundTruthMsg):
@@ -218,7 +212,3 @@ class RunFilesSink:
 
 def _values(T: SE3) -> list[float]:
     return [*np.asarray(T.translation).tolist(), *np.asarray(T.as_quat()).tolist()]
-
-
-def _num(value: float) -> float | None:
-    return value if math.isfinite(value) else None

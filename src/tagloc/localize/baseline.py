@@ -58,11 +58,13 @@ class BaselineRun:
 
 
 def offered_single_tag_fixes(fixes: Sequence[FixAttempt]) -> list[FixAttempt]:
-    """The single-tag fixes (``source`` ``"tag:<id>"``) that passed the per-observation gates
-    (decision not ``"rejected:..."``), in stamp order (stable for equal stamps)."""
+    """The single-tag fixes (``source`` ``"tag:<id>"``) of map tags that passed the
+    per-observation gates (decision not ``"rejected:..."``), in stamp order (stable for equal
+    stamps). A cab tag's fix is a pose in the cab, not in the map: never snapped to."""
     offered = [
-        a for a in fixes if not a.decision.startswith("rejected:") and a.source.startswith("tag:")
-    ]
+        a for a in fixes
+        if a.in_map and not a.decision.startswith("rejected:") and a.source.startswith("tag:")
+    ]  # fmt: skip
     return sorted(offered, key=lambda a: a.stamp_ns)
 
 

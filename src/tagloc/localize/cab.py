@@ -38,7 +38,7 @@ from tagloc.frames import TransformBuffer
 from tagloc.geometry import SE3
 from tagloc.localize.config import LocalizerConfig
 from tagloc.localize.events import APPLIED, EventKind, FilterEvent
-from tagloc.localize.fiducial import E_Z, FiducialConfig, FiducialFixSource
+from tagloc.localize.fiducial import E_Z, FiducialConfig, FiducialFixSource, SourcedFix
 from tagloc.localize.filter import MapOdomFilter
 from tagloc.localize.fix import LocalizeError
 from tagloc.localize.floors import FloorFrame, floor_table, tag_ids_of
@@ -95,6 +95,8 @@ class Elevators:
         self._step_ns = round(config.process_noise.motion_step_s * S_NS)
         self.cab_fixes = {"offered": 0, "accepted": 0}
         self.rides = 0
+        #: Hears each cab fix with its decision (the node's ``FixDecisions.record``).
+        self.on_fix: Callable[[str, SourcedFix, FilterEvent, MapOdomFilter], None] | None = None
 
     @classmethod
     def build(
@@ -254,7 +256,9 @@ class Elevators:
                 prior = None
         for sourced in source.frame_fixes(stamp_ns, detections, prior).fixes:
             self.cab_fixes["offered"] += 1
-            cab.update(sourced.fix)
+            event = cab.update(sourced.fix)
+            if self.on_fix is not None:
+                self.on_fix(cab_frame, sourced, event, cab)
 
     def _cab_event(self, event: FilterEvent) -> None:
         """An event of the cab's filter: the last applied fix, for the ladder."""

@@ -9,7 +9,10 @@ the held attempts it decided (:class:`~tagloc.localize.held.HeldRecords`), and e
 decision enters the supervisor's quality books of its source (NIS per measured direction); then
 the frame's record is held and the records older than the hold window (the consistency and
 kidnap windows and 1 s) are handed on. An accepted fix that measures every direction of the
-filter is the last fix the supervisor's gap clock counts from.
+filter is the last fix the supervisor's gap clock counts from. The fixes of an elevator cab's
+tags, decided by the cab's own filter (:mod:`tagloc.localize.cab`), leave by the same path
+(:meth:`FixDecisions.record`), their :attr:`~tagloc.localize.run.FixAttempt.frame` naming the
+cab.
 """
 
 from __future__ import annotations
@@ -20,15 +23,16 @@ from collections.abc import Callable, Sequence
 
 from tagloc.localize.config import LocalizerConfig
 from tagloc.localize.events import APPLIED, EventKind, FilterEvent
+from tagloc.localize.fiducial import SourcedFix
 from tagloc.localize.filter import MapOdomFilter
 from tagloc.localize.fix import TagFix
 from tagloc.localize.held import HeldRecords, Record
+from tagloc.localize.run import FixAttempt
 from tagloc.localize.sources import FixSource, SourceResult
 from tagloc.supervise import Supervisor
 from tagloc.units import S_NS
 
 __all__ = ["FixDecisions"]
-
 
 
 class FixDecisions:
@@ -81,6 +85,23 @@ class FixDecisions:
             self._held.hold(result.frame)
         if result.release_ns is not None:
             self._held.release(result.release_ns - self._held_ns)
+
+    def record(
+        self, frame: str, sourced: SourcedFix, event: FilterEvent, flt: MapOdomFilter
+    ) -> None:
+        """Hold the attempt of a fix another filter decided (an elevator cab's, of the tags
+        posed in ``frame``), with its decision; that filter's batch decision relabels the held
+        attempts it used. The supervisor's books and the gap clock are the ``map -> odom``
+        filter's alone, so they are not touched (the cab's component keeps its own)."""
+        fix = sourced.fix
+        q = fix.quality
+        attempt = FixAttempt(
+            fix.stamp_ns, fix.source, sourced.tag_ids, fix.T_map_base, fix.cov,
+            event.kind.value, q.range_m, q.view_angle_rad, sourced.false_detection, event.d2,
+            frame=frame,
+        )  # fmt: skip
+        self._held.hold(attempt, fix)
+        self._held.relabel(flt.last_batch)
 
     def discarded(self, stamp_ns: int, source: str) -> None:
         """The filter discarded a fix it held for consistency (its attempt says so)."""

@@ -168,7 +168,7 @@ class ExtrinsicRecorder:
         if isinstance(output, Estimate):
             self._odometry(output)
         elif (
-            isinstance(output, FixAttempt) and output.accepted
+            isinstance(output, FixAttempt) and output.accepted and output.in_map
             and self._n < self.max_fixes and self._m
         ):  # fmt: skip
             if self._n % _CHUNK == 0:
@@ -256,7 +256,8 @@ def check_extrinsics(
     Parameters
     ----------
     fix_attempts : sequence of FixAttempt
-        The run's fix attempts (accepted ones are used).
+        The run's fix attempts (the accepted fixes of the map are used: a cab's fixes are
+        against odometry that rides with the cab).
     stamps_ns, T_odom_base : (N,) int64, SE3 batch of N
         The odometry, increasing stamps.
     T_base_cam : SE3
@@ -269,7 +270,7 @@ def check_extrinsics(
     ExtrinsicCheck or None
         None with fewer than ``min_pairs`` pairs or ``min_blocks`` blocks.
     """
-    fixes = sorted((f for f in fix_attempts if f.accepted), key=lambda f: f.stamp_ns)
+    fixes = sorted((f for f in fix_attempts if f.accepted and f.in_map), key=lambda f: f.stamp_ns)
     if len(fixes) < 2 or len(stamps_ns) < 2:
         return None
     stamps = np.array([f.stamp_ns for f in fixes], dtype=np.int64)

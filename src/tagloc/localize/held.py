@@ -71,6 +71,7 @@ class HeldRecords:
         for i, a in enumerate(self._held):
             if (
                 isinstance(a, FixAttempt)
+                and a.in_map
                 and a.stamp_ns == stamp_ns
                 and a.source == source
                 and a.decision == pending
@@ -80,12 +81,14 @@ class HeldRecords:
 
     def release(self, horizon_ns: int | None) -> None:
         """Hand on the records stamped before ``horizon_ns`` (all with None), in order; a frame
-        record gets the count of its accepted fixes."""
+        record gets the count of its accepted fixes of the map."""
         while self._held and (horizon_ns is None or self._held[0].stamp_ns < horizon_ns):
             record = self._held.popleft()
             self._serial0 += 1
             if isinstance(record, FixAttempt):
-                if record.accepted and record.tag_ids:  # a lidar fix is no camera frame's
+                # the frame counts the map's fixes: a lidar fix is no camera frame's, a cab's
+                # is decided by another filter (and held after its frame's record)
+                if record.accepted and record.tag_ids and record.in_map:
                     self._accepted_at[record.stamp_ns] += 1
             else:
                 n = self._accepted_at.pop(record.stamp_ns, 0)

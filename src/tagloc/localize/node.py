@@ -138,6 +138,8 @@ class LocalizerNode:
         self._queue = WorkQueue()
         self._skipped = SkipCounter()
         self._decisions = FixDecisions(cfg, self.supervisor, self._emit)
+        if self._elevators is not None:  # the cab's fix attempts leave with the map's
+            self._elevators.on_fix = self._decisions.record
         self._estimates = EstimateOutput(cfg)
         self._jump_ns = round(cfg.supervisor.clock_jump_s * S_NS)
         self._odom_cov_growth = cfg.process_noise.odometry_covariance == "growth"

@@ -19,12 +19,16 @@ is in memory, stamped in integer nanoseconds, with frame names in the field name
   estimate at each row before the cap and the speed limit (None where not recorded).
 - ``cab``: the node's :class:`CabEstimate` s (the pose relative to an elevator cab, while in
   one), ``cab_moves``: the map <-> cab handoff's transitions, ``floors``: the floor published
-  with each row (None: unknown, or a building without floors).
+  with each row (None: unknown, or a building without floors); ``T_cab_base_truth``: the truth
+  of each ``cab`` estimate when known (simulator).
 """
 
 from __future__ import annotations
 
+import math
+from collections.abc import Container, Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -98,6 +102,11 @@ class FixAttempt:
     camera : str
         The camera whose frame the fix came from (``""``: the node's only camera, or not a
         camera's fix).
+    frame : str
+        The tag-map frame the fix's tags are posed in: ``""`` for the map (its ``T_map_base``
+        is the base in ``map``), an elevator cab's frame for a fix of the cab's tags (its
+        ``T_map_base`` is then the base in that cab, decided by the cab's estimator). A record
+        written before the field existed is a map fix.
     """
 
     stamp_ns: int
@@ -111,11 +120,50 @@ class FixAttempt:
     false_detection: bool | None = None
     d2: float | None = None
     camera: str = ""
+    frame: str = ""
 
     @property
     def accepted(self) -> bool:
         """Whether the filter accepted (or initialized from) the fix."""
         return self.decision in APPLIED
+
+    @property
+    def in_map(self) -> bool:
+        """Whether the fix is of the map (not of a cab's tags): what ``map -> odom`` used."""
+        return not self.frame
+
+    def to_row(self) -> dict[str, object]:
+        """The ``fixes.jsonl`` row (no pose: the fused trajectory carries the poses; NaN as
+        None); :meth:`from_row` reads it back."""
+        return {
+            "stamp_ns": self.stamp_ns, "source": self.source, "decision": self.decision,
+            "range_m": _num(self.range_m), "view_angle_rad": _num(self.view_angle_rad),
+            "false_detection": self.false_detection,
+            "d2": None if self.d2 is None else _num(self.d2), "camera": self.camera,
+            "frame": self.frame,
+        }  # fmt: skip
+
+    @classmethod
+    def from_row(cls, row: Mapping[str, Any]) -> FixAttempt:
+        """The attempt of a ``fixes.jsonl`` row (pose unknown: identity, covariance NaN).
+        Rows of older files lack ``camera``, ``d2`` or ``frame``: their defaults (a map fix).
+
+        Raises
+        ------
+        KeyError, ValueError
+            A row without ``stamp_ns``, ``source`` or ``decision``, or with a malformed
+            ``source``.
+        """
+        source = str(row["source"])
+        kind, _, ids = source.partition(":")
+        tag_ids = tuple(int(i) for i in ids.split(",")) if kind in ("tag", "tags") else ()
+        d2 = row.get("d2")
+        return cls(
+            int(row["stamp_ns"]), source, tag_ids, SE3.identity(), np.full((6, 6), np.nan),
+            str(row["decision"]), _float(row.get("range_m")), _float(row.get("view_angle_rad")),
+            row.get("false_detection"), None if d2 is None else float(d2),
+            str(row.get("camera", "")), str(row.get("frame") or ""),
+        )  # fmt: skip
 
 
 @dataclass(frozen=True, slots=True)
@@ -131,13 +179,25 @@ class CameraFrameRecord:
     n_detections : int
         Detections the detector reported (true and false).
     n_fixes_accepted : int
-        Fixes from this frame the filter accepted.
+        Fixes from this frame the ``map -> odom`` filter accepted (a cab's fixes are counted
+        by their :class:`FixAttempt` s, :attr:`FixAttempt.frame`).
+    nearest_by_frame : tuple of (str, float)
+        Per tag-map frame with a tag truly in view (``"map"``, a cab's frame), camera to its
+        nearest tag, m (simulator truth; empty when unknown: a bag).
     """
 
     stamp_ns: int
     nearest_visible_tag_m: float
     n_detections: int
     n_fixes_accepted: int
+    nearest_by_frame: tuple[tuple[str, float], ...] = ()
+
+    def nearest_in(self, frames: Container[str], inside: bool = True) -> float:
+        """Camera to the nearest tag truly in view posed in one of ``frames`` (``inside``
+        False: in none of them), m (``inf``: none, or no per-frame truth)."""
+        return min(
+            (m for f, m in self.nearest_by_frame if (f in frames) == inside), default=math.inf
+        )
 
 
 @dataclass(slots=True, eq=False)
@@ -165,6 +225,10 @@ class LocalizationRun:
     ladder : list of LadderTransition
     T_map_odom_estimate : SE3 batch of N or None
         The filter's estimate (unclipped) at each stamp; identity where not initialized.
+    cab, cab_moves, floors :
+        See the module docstring.
+    T_cab_base_truth : SE3 batch of len(cab) or None
+        The true base in the cab of each ``cab`` estimate, at its stamp (simulator), else None.
     """
 
     name: str
@@ -184,8 +248,17 @@ class LocalizationRun:
     cab: list[CabEstimate] = field(default_factory=list)
     cab_moves: list[CabTransition] = field(default_factory=list)
     floors: list[str | None] = field(default_factory=list)
+    T_cab_base_truth: SE3 | None = None
 
     @property
     def T_map_base(self) -> SE3:
         """The fused estimate of the base in the map, ``T_map_odom @ T_odom_base`` (batch)."""
         return self.T_map_odom @ self.T_odom_base
+
+
+def _num(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None
+
+
+def _float(value: object) -> float:
+    return math.nan if value is None else float(value)  # type: ignore[arg-type]

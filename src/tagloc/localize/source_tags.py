@@ -183,7 +183,8 @@ class TagSource:
             for s in result.fixes
         )  # fmt: skip
         nearest = truth.nearest_visible_m if truth is not None else _nearest(result)
-        record = CameraFrameRecord(frame.stamp_ns, nearest, len(frame.detections), 0)
+        by_frame = truth.nearest_by_frame if truth is not None else ()
+        record = CameraFrameRecord(frame.stamp_ns, nearest, len(frame.detections), 0, by_frame)
         return SourceResult(offers, refused, 0, record, frame.stamp_ns, frame.detections)
 
     def observe(self, result: SourceResult) -> None:

@@ -3,6 +3,7 @@ frame's simulator truth, and the :class:`MessageSource` / :class:`MessageSink` p
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from types import TracebackType
@@ -59,10 +60,18 @@ class FrameTruth:
         Per detection of the frame's ``TagDetectionsMsg``: injected (a glint) or real.
     nearest_visible_m : float
         Camera to the nearest tag truly in view, m (``inf``: none).
+    nearest_by_frame : tuple of (str, float)
+        Per tag frame with a tag truly in view (``"map"``, an elevator cab's frame), camera
+        to its nearest tag, m, in frame order (empty: not known).
     """
 
     false_detection: tuple[bool, ...]
     nearest_visible_m: float
+    nearest_by_frame: tuple[tuple[str, float], ...] = ()
+
+    def nearest_in(self, frame: str) -> float:
+        """Camera to the nearest tag truly in view posed in ``frame``, m (``inf``: none)."""
+        return min((m for f, m in self.nearest_by_frame if f == frame), default=math.inf)
 
 
 class MessageSource(Protocol):

@@ -2,7 +2,8 @@
 
 A scenario's stream (:class:`~tagloc.sim.scenarios.ScenarioSource`) simulates its camera frames
 lazily; the node looks a frame's truth up (:class:`~tagloc.messages.FrameTruth`: which
-detections are injected glints, the nearest tag truly in view) once the frame has reached it.
+detections are injected glints, the nearest tag truly in view, overall and per tag frame:
+``map`` or an elevator cab's) once the frame has reached it.
 The map keeps the truth of the last ``cache`` frames the stream produced; any other frame of
 the drive is simulated again on lookup (each frame's noise is seeded by its stamp alone, so the
 result is the same as the stream's). Its keys are the drive's camera stamps.
@@ -23,30 +24,41 @@ from tagloc.sim.observations import ObservedFrame
 __all__ = ["FrameTruthMap", "frame_truth_of"]
 
 
-def frame_truth_of(frame: ObservedFrame) -> FrameTruth:
-    """The run record's truth of one simulated frame."""
+def frame_truth_of(
+    frame: ObservedFrame, tag_frames: Mapping[int, str] | None = None
+) -> FrameTruth:
+    """The run record's truth of one simulated frame; ``tag_frames`` (tag id -> the frame it
+    is posed in; default: every tag in ``map``) gives the nearest tag per frame."""
+    nearest: dict[str, float] = {}
+    for s in frame.truth:
+        f = "map" if tag_frames is None else tag_frames.get(s.tag_id, "map")
+        nearest[f] = min(nearest.get(f, math.inf), s.range_m)
     return FrameTruth(
-        frame.false_detection, min((s.range_m for s in frame.truth), default=math.inf)
-    )
+        frame.false_detection, min(nearest.values(), default=math.inf),
+        tuple(sorted(nearest.items())),
+    )  # fmt: skip
 
 
 class FrameTruthMap(Mapping[int, FrameTruth]):
     """Stamp -> :class:`~tagloc.messages.FrameTruth` of a drive's camera frames (module
-    docstring). ``simulate(stamps)``: the frames at those stamps, in order."""
+    docstring). ``simulate(stamps)``: the frames at those stamps, in order; ``tag_frames``: as
+    :func:`frame_truth_of`'s."""
 
     def __init__(
         self,
         stamps_ns: npt.NDArray[np.int64],
         simulate: Callable[[npt.NDArray[np.int64]], Iterable[ObservedFrame]],
         cache: int = 4096,
+        tag_frames: Mapping[int, str] | None = None,
     ) -> None:
         self._stamps = np.asarray(stamps_ns, dtype=np.int64)
         self._simulate, self._cache_size = simulate, cache
+        self._tag_frames = None if tag_frames is None else dict(tag_frames)
         self._cache: OrderedDict[int, FrameTruth] = OrderedDict()
 
     def record(self, frame: ObservedFrame) -> None:
         """Keep the truth of a frame the stream just produced (the oldest kept is dropped)."""
-        self._keep(frame.stamp_ns, frame_truth_of(frame))
+        self._keep(frame.stamp_ns, frame_truth_of(frame, self._tag_frames))
 
     def _keep(self, stamp: int, truth: FrameTruth) -> None:
         self._cache[stamp] = truth
@@ -67,7 +79,7 @@ class FrameTruthMap(Mapping[int, FrameTruth]):
         if k == len(self._stamps) or int(self._stamps[k]) != stamp:
             raise KeyError(stamp)
         frame = next(iter(self._simulate(self._stamps[k : k + 1])))
-        truth = frame_truth_of(frame)
+        truth = frame_truth_of(frame, self._tag_frames)
         self._keep(stamp, truth)
         return truth
 

@@ -60,7 +60,10 @@ class ScenarioSource:
         ignores them need not simulate them: 4 ms of CPU per sweep)."""
         self.scenario, self.t = scenario, topics or NodeTopics()
         drive = scenario.drive
-        self.frame_truth = FrameTruthMap(scenario.camera_stamps_ns, self._observe)
+        tag_frames = {t.id: t.frame for t, _ in scenario.world.all_tags()}
+        self.frame_truth = FrameTruthMap(
+            scenario.camera_stamps_ns, self._observe, tag_frames=tag_frames
+        )
         self.glints_injected = 0  # false detections streamed so far
         robot = scenario.world.robot
         self.camera = robot.camera.camera_model()
