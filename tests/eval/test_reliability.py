@@ -3,6 +3,7 @@ whose errors are known by construction."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -15,7 +16,9 @@ from tagloc.eval.summary import evaluate
 from tagloc.eval.trajectories import correction_jumps, pose_errors, relative_pose_error
 from tagloc.geometry import SE3
 from tagloc.localize.events import EventKind, FilterEvent
-from tagloc.localize.run import CameraFrameRecord, FixAttempt, LocalizationRun
+from tagloc.localize.run import CabEstimate, CameraFrameRecord, FixAttempt, LocalizationRun
+from tagloc.supervise import CabState
+from tagloc.units import S_NS
 
 DT_NS = 10_000_000  # 100 Hz odometry
 N = 1001  # 10 s
@@ -197,3 +200,64 @@ def test_rpe_of_a_scale_error_is_known() -> None:
     assert rpe.translation_rmse_m == pytest.approx(0.02, rel=1e-6)
     assert rpe.rotation_rmse_deg == pytest.approx(0.0, abs=1e-9)
     assert relative_pose_error(stamps[:3], truth[:3], est[:3]) is None
+
+
+def _cab_run(dx_cab_m: float, yaw_cab_deg: float = 0.0) -> tuple[LocalizationRun, set[int]]:
+    """10 s along x; 10 Hz frames, a map tag at 2 m for t < 5 s, after that only the cab's tag
+    within Z (a map tag at 5 m); the cab's estimate, at every row from 5 s, is the truth of the
+    base in the cab displaced by ``dx_cab_m`` / ``yaw_cab_deg``; a cab fix accepted on the
+    cab-only frames but every 5th. Returns the run and the frames whose cab fix was accepted."""
+    truth = _line()
+    stamps = np.arange(N, dtype=np.int64) * DT_NS
+    frames, fixes, accepted = [], [], set()
+    for k in range(100):
+        stamp = k * 100_000_000 + 5_000_000
+        cab_only = k >= 50
+        by_frame = (("cab", 1.5), ("map", 5.0)) if cab_only else (("map", 2.0),)
+        frames.append(CameraFrameRecord(stamp, 1.5 if cab_only else 2.0, 1, int(not cab_only),
+                                        by_frame))  # fmt: skip
+        if cab_only and k % 5:
+            fixes.append(dataclasses.replace(_fix(stamp), frame="cab"))
+            accepted.add(k)
+    T_map_cab = SE3.from_rotvec(np.array([0.0, 0.0, 0.7]), np.array([3.0, -1.0, 4.0]))
+    rows = np.flatnonzero(stamps >= 5 * S_NS)
+    T_cab_base_truth = T_map_cab.inverse() @ truth[rows]
+    shift = SE3.from_rotvec(np.zeros(3), np.array([dx_cab_m, 0.0, 0.0]))
+    turn = SE3.from_rotvec(np.array([0.0, 0.0, math.radians(yaw_cab_deg)]), np.zeros(3))
+    T_cab_base_est = shift @ T_cab_base_truth @ turn
+    T_odom_base = truth  # as _run's
+    cab = [
+        CabEstimate(int(stamps[i]), "cab", T_cab_base_est[j] @ T_odom_base[i].inverse(),
+                    T_odom_base[i], np.eye(6) * 1e-6, CabState.IN_CAB)
+        for j, i in enumerate(rows)
+    ]  # fmt: skip
+    run = _run(truth, frames, fixes=fixes, cab=cab, T_cab_base_truth=T_cab_base_truth,
+               metadata={"elevators": {"cab_frames": ["cab"]}})  # fmt: skip
+    return run, accepted
+
+
+def test_cab_only_opportunities_are_judged_against_the_cabs_truth() -> None:
+    run, accepted = _cab_run(0.0)
+    r = evaluate(run).summary.estimators["fused"].reliability
+    assert r is not None
+    # the map's 50 frames: exact map pose, fix accepted; the cab's 50: judged against the cab
+    assert (r.in_map.n_opportunities, r.in_map.n_success) == (50, 50)
+    assert len(accepted) == 40
+    assert (r.in_cab.n_opportunities, r.in_cab.n_fix_accepted) == (50, 40)
+    assert r.in_cab.n_success == 40 and r.n_success == 90 and r.n_opportunities == 100
+    # a cab estimate 6 cm off (X = 5 cm) or 3 deg off (Y = 2 deg) fails every cab opportunity
+    for dx, yaw in ((0.06, 0.0), (0.0, 3.0)):
+        bad = evaluate(_cab_run(dx, yaw)[0]).summary.estimators["fused"].reliability
+        assert bad is not None and bad.in_cab.n_success == 0 and bad.in_map.n_success == 50
+    # 4 cm off passes; the baseline has no cab estimate: none of its cab frames succeeds
+    near = evaluate(_cab_run(0.04)[0]).summary.estimators
+    assert near["fused"].reliability.in_cab.n_success == 40  # type: ignore[union-attr]
+    assert near["baseline"].reliability.in_cab.n_success == 0  # type: ignore[union-attr]
+
+
+def test_without_cab_frames_every_opportunity_is_the_maps() -> None:
+    run, _ = _cab_run(0.0)
+    errors = pose_errors(run.T_map_base_truth, run.T_map_base)  # type: ignore[arg-type]
+    r = reliability_protocol(run.frames, run.stamps_ns, errors, EvalConfig())
+    # the cab-only frames judged against map, as before: no map fix accepted there
+    assert (r.in_cab.n_opportunities, r.in_map.n_opportunities, r.n_success) == (0, 100, 50)

@@ -7,10 +7,14 @@ give fixes of ``T_cab_base``; the oracle is the simulator's truth ``T_map_cab^-1
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from tagloc.eval.scenarios import localize_scenario
+from tagloc.eval.summary import evaluate
+from tagloc.geometry import SE3
 from tagloc.localize import LocalizerConfig
 from tagloc.localize.fix import LocalizeError
 from tagloc.localize.node import LocalizerNode
@@ -82,3 +86,45 @@ def test_a_tag_map_with_an_unknown_cab_frame_is_refused_at_start_up() -> None:
         "the tag map has tags in frame 'cab_west', which the configuration does not know as a "
         "cab (elevators.cab_frames: elevator_cab)"
     )
+
+
+def test_cab_only_frames_are_judged_against_the_simulators_cab_truth(
+    cab_run: tuple[Scenario, LocalizationRun],
+) -> None:
+    scenario, run = cab_run
+    # oracle: the simulator's base in the (still) cab at each cab estimate's odometry stamp
+    T_map_cab = scenario.world.elevator.T_map_cab()  # type: ignore[union-attr]
+    stamps = np.array([c.stamp_ns for c in run.cab], dtype=np.int64)
+    T_true = T_map_cab.inverse() @ scenario.drive.ground_truth_at(stamps).T_map_base
+    row_of = {int(s): i for i, s in enumerate(stamps)}
+    accepted = {a.stamp_ns for a in run.fixes if a.frame == "elevator_cab" and a.accepted}
+    odom = np.asarray(run.stamps_ns)
+
+    def by_hand(T_cab_base: list[SE3]) -> tuple[int, int]:
+        """Cab-only opportunities (the cab's tag within 3 m, no map tag) and their successes."""
+        n = ok = 0
+        for f in run.frames:
+            if f.nearest_in({"elevator_cab"}) > 3.0 or f.nearest_in({"elevator_cab"}, False) <= 3:
+                continue
+            n += 1
+            i = row_of.get(int(odom[min(np.searchsorted(odom, f.stamp_ns), len(odom) - 1)]))
+            if i is None or f.stamp_ns not in accepted:
+                continue
+            d = T_true[i].inverse() @ T_cab_base[i]
+            ok += bool(np.linalg.norm(d.translation) <= 0.05
+                       and np.degrees(np.linalg.norm(d.rotation.as_rotvec())) <= 2.0)  # fmt: skip
+        return n, ok
+
+    r = evaluate(run).summary.estimators["fused"].reliability
+    assert r is not None
+    n, ok = by_hand([c.T_cab_base for c in run.cab])
+    assert n >= 30 and (r.in_cab.n_opportunities, r.in_cab.n_success) == (n, ok)
+    assert ok >= 0.8 * n  # the node's pose relative to the cab: within 5 cm / 2 deg
+    # a cab estimate corrupted by 8 cm fails every cab opportunity; the map's are unchanged
+    shift = SE3.from_rotvec(np.zeros(3), np.array([0.08, 0.0, 0.0]))
+    bad = dataclasses.replace(
+        run, cab=[dataclasses.replace(c, T_cab_odom=shift @ c.T_cab_odom) for c in run.cab]
+    )
+    rb = evaluate(bad).summary.estimators["fused"].reliability
+    assert rb is not None and by_hand([c.T_cab_base for c in bad.cab]) == (n, 0)
+    assert rb.in_cab.n_success == 0 and rb.in_map == r.in_map

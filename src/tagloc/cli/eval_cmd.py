@@ -89,7 +89,10 @@ def print_summary(summary: EvalSummary) -> None:
     for column in ("estimate", "ATE RMSE (m)", "largest jump (m)", "false fixes", "reliability"):
         table.add_column(column, justify="right")
     for name, e in summary.estimators.items():
-        reliability = "" if e.reliability is None else f"{e.reliability.fraction:.4f}"
+        r = e.reliability
+        reliability = "" if r is None else f"{r.fraction:.4f}"
+        if r is not None and r.in_cab.n_opportunities:  # the two populations, too
+            reliability += f" (map {r.in_map.fraction:.4f}, cab {r.in_cab.fraction:.4f})"
         false = "" if e.false_fixes_accepted is None else str(e.false_fixes_accepted)
         table.add_row(name, f"{e.ate_rmse_m:.4f}", f"{e.largest_jump_m:.3f}", false, reliability)
     console = Console()

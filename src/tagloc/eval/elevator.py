@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from tagloc.eval.cab_protocol import CabErrors
 from tagloc.geometry import SE3
 from tagloc.localize.events import EventKind
 from tagloc.localize.floors import tag_ids_of
@@ -31,7 +32,7 @@ from tagloc.localize.run import LocalizationRun
 from tagloc.supervise import CabState
 from tagloc.units import S_NS
 
-__all__ = ["RideTruth", "apply_ride_checks", "elevator_checks", "exits"]
+__all__ = ["RideTruth", "apply_ride_checks", "cab_errors", "cab_truth", "elevator_checks", "exits"]
 
 #: Targets (issue-free names: what the elevator story promises).
 CAB_RMS_M, EXIT_M, EXIT_AFTER_S = 0.02, 0.05, 1.0
@@ -105,6 +106,43 @@ def elevator_checks(run: LocalizationRun, truth: RideTruth) -> list[tuple[str, f
     ate = _ate_floor_known(run)
     checks.append(("fused ATE RMSE while the floor is known (m)", ate, "<= 0.1", ate <= 0.1))
     return checks
+
+
+def cab_truth(run: LocalizationRun, truth: RideTruth) -> SE3 | None:
+    """The true base in the cab of each of ``run.cab``'s estimates, at its stamp (None
+    without one): what :attr:`LocalizationRun.T_cab_base_truth` holds."""
+    if not run.cab:
+        return None
+    stamps = np.array([c.stamp_ns for c in run.cab], dtype=np.int64)
+    frames = np.array([c.cab_frame for c in run.cab])
+    xyz, R = np.empty((len(stamps), 3)), np.empty((len(stamps), 3, 3))
+    for cab_frame in sorted(set(frames.tolist())):
+        mine = frames == cab_frame
+        T = truth.T_cab_base(cab_frame, stamps[mine])
+        xyz[mine], R[mine] = T.translation, T.rotation.matrix
+    return SE3.from_trusted(R, xyz)
+
+
+def cab_errors(run: LocalizationRun) -> CabErrors | None:
+    """The run's estimates relative to its cabs judged against their truth, for the
+    reliability protocol's cab opportunities (None for a run without cab frames; with cab
+    frames but without the truth, None too: the cab's opportunities cannot be judged)."""
+    if run.T_cab_base_truth is None and run.cab:
+        return None
+    cabs = cab_frames_of(run)
+    if not cabs:
+        return None
+    truth = run.T_cab_base_truth if run.T_cab_base_truth is not None else SE3.identity()
+    return CabErrors.of(cabs, run.cab, truth, run.fixes)
+
+
+def cab_frames_of(run: LocalizationRun) -> tuple[str, ...]:
+    """The cab frames of the run's tag map (its ``elevators`` metadata), and those of its
+    cab estimates and fixes."""
+    meta = run.metadata.get("elevators")
+    listed = meta.get("cab_frames", []) if isinstance(meta, dict) else []
+    found = {c.cab_frame for c in run.cab} | {a.frame for a in run.fixes if not a.in_map}
+    return tuple(sorted({str(f) for f in listed} | found))
 
 
 def apply_ride_checks(

@@ -7,6 +7,16 @@ that frame was accepted and the published ``T_map_base`` right after (at the fir
 stamp at or after the frame, the row at which the pipeline applies the frame's fixes) is within
 ``X`` m and ``Y`` degrees of ground truth. Defaults: ``Z = 3 m``, ``X = 5 cm``, ``Y = 2 deg``.
 
+Two populations, reported apart and summed. A *cab* opportunity sees, within ``Z``, only the
+tags of an elevator cab (posed in the cab's frame; :attr:`CameraFrameRecord.nearest_by_frame`):
+there the node localizes relative to the cab, so it is judged against the cab: a success when a
+fix of the cab's tags from that frame was accepted (by the cab's estimator,
+:attr:`FixAttempt.frame`) and the published ``T_<cab>_base`` at that same row (the node's
+:class:`~tagloc.localize.run.CabEstimate`) is within ``X`` / ``Y`` of the simulator's base
+relative to the cab at that stamp (:class:`~tagloc.eval.cab_protocol.CabErrors`); no cab
+estimate at that row is a miss. Every other opportunity (a tag of the map within ``Z``) is a
+*map* opportunity, judged as above.
+
 Time to relocalize after a kidnap: from the first frame after the kidnap that sees a tag (truly in
 view and detected) to the first accepted fix after the kidnap whose published pose right after is
 within ``X`` / ``Y`` of truth.
@@ -14,7 +24,7 @@ within ``X`` / ``Y`` of truth.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,6 +32,7 @@ import numpy.typing as npt
 from pydantic import Field
 
 from tagloc.config import StrictModel
+from tagloc.eval.cab_protocol import CabErrors, cab_successes
 from tagloc.eval.trajectories import PoseErrors
 from tagloc.localize.run import CameraFrameRecord, FixAttempt
 
@@ -46,6 +57,33 @@ class EvalConfig(StrictModel):
 
 
 @dataclass(frozen=True, slots=True)
+class Population:
+    """The protocol's counts over one population of opportunities (module docstring).
+
+    Attributes
+    ----------
+    n_opportunities, n_fix_accepted, n_success : int
+        As :class:`Reliability`'s, over this population.
+    fraction : float
+        ``n_success / n_opportunities`` (NaN with no opportunity).
+    """
+
+    n_opportunities: int
+    n_fix_accepted: int
+    n_success: int
+    fraction: float
+
+    @classmethod
+    def count(
+        cls, opportunity: npt.NDArray[np.bool_], fix_accepted: npt.NDArray[np.bool_],
+        success: npt.NDArray[np.bool_],
+    ) -> Population:  # fmt: skip
+        n, k = int(np.count_nonzero(opportunity)), int(np.count_nonzero(opportunity & success))
+        accepted = int(np.count_nonzero(opportunity & fix_accepted))
+        return cls(n, accepted, k, k / n if n else float("nan"))
+
+
+@dataclass(frozen=True, slots=True)
 class Reliability:
     """Outcome of the per-opportunity protocol (module docstring).
 
@@ -54,13 +92,16 @@ class Reliability:
     n_opportunities : int
         Frames with a tag truly in view within ``range_m``.
     n_fix_accepted : int
-        Of those, frames with at least one accepted fix.
+        Of those, frames with at least one accepted fix (of the population's estimator).
     n_success : int
         Of those, frames whose pose right after was within tolerance.
     fraction : float
         ``n_success / n_opportunities`` (NaN with no opportunity).
     range_m, position_tol_m, rotation_tol_deg : float
         The protocol's ``Z``, ``X``, ``Y``.
+    in_map, in_cab : Population
+        The map's opportunities, judged against ``map``; the cab-only ones, judged against the
+        cab (the counts above are their sums).
     """
 
     n_opportunities: int
@@ -70,6 +111,8 @@ class Reliability:
     range_m: float
     position_tol_m: float
     rotation_tol_deg: float
+    in_map: Population
+    in_cab: Population
 
 
 def rows_after(
@@ -94,6 +137,8 @@ def reliability_protocol(
     config: EvalConfig,
     *,
     accepted_per_frame: Sequence[int] | None = None,
+    cab_frames: Iterable[str] = (),
+    cab: CabErrors | None = None,
 ) -> Reliability:
     """Count opportunities and successes (module docstring).
 
@@ -108,28 +153,49 @@ def reliability_protocol(
     accepted_per_frame : sequence of int, optional
         Fixes accepted per frame, to score another estimator (the baseline) on the same frames;
         default :attr:`CameraFrameRecord.n_fixes_accepted`.
+    cab_frames : iterable of str
+        The tag map's cab frames (default ``cab.cab_frames``; none: every opportunity is the
+        map's).
+    cab : CabErrors, optional
+        The estimate relative to the cab; None: no such estimate, every cab opportunity is a
+        miss (the baseline has none).
     """
+    Z = config.opportunity_range_m
+    cabs = frozenset(cab_frames) | (cab.cab_frames if cab is not None else frozenset())
     accepted = (
         np.array([f.n_fixes_accepted for f in frames])
         if accepted_per_frame is None
         else np.asarray(accepted_per_frame)
     )
     nearest_m = np.array([f.nearest_visible_tag_m for f in frames], dtype=np.float64)
-    opportunity = nearest_m <= config.opportunity_range_m
+    opportunity = nearest_m <= Z
+    in_cab = opportunity & np.array(
+        [bool(cabs and f.nearest_by_frame) and f.nearest_in(cabs, inside=False) > Z
+         for f in frames], dtype=bool,
+    )  # fmt: skip
     ok = within_tolerance(errors, config.position_tol_m, config.rotation_tol_deg)
     rows = rows_after(stamps_ns, [f.stamp_ns for f in frames])
-    fix_accepted = opportunity & (accepted > 0)
+    fix_accepted = accepted > 0
     success = fix_accepted & ok[rows] if len(frames) else fix_accepted
+    in_map = opportunity & ~in_cab
+    row_stamps = stamps_ns[rows] if len(frames) else np.zeros(0, dtype=np.int64)
+    cab_accepted, cab_ok = cab_successes(
+        frames, in_cab, row_stamps, cab, config.position_tol_m, config.rotation_tol_deg
+    )
+    fix_accepted = np.where(in_cab, cab_accepted, fix_accepted)
+    success = np.where(in_cab, cab_ok, success)
     n = int(np.count_nonzero(opportunity))
-    n_success = int(np.count_nonzero(success))
+    n_success = int(np.count_nonzero(opportunity & success))
     return Reliability(
         n_opportunities=n,
-        n_fix_accepted=int(np.count_nonzero(fix_accepted)),
+        n_fix_accepted=int(np.count_nonzero(opportunity & fix_accepted)),
         n_success=n_success,
         fraction=n_success / n if n else float("nan"),
-        range_m=config.opportunity_range_m,
+        range_m=Z,
         position_tol_m=config.position_tol_m,
         rotation_tol_deg=config.rotation_tol_deg,
+        in_map=Population.count(in_map, fix_accepted, success),
+        in_cab=Population.count(in_cab, fix_accepted, success),
     )
 
 
@@ -178,7 +244,9 @@ def relocalization_times(
             ),
             -1,
         )
-        candidates = sorted(a.stamp_ns for a in fixes if a.accepted and kidnap <= a.stamp_ns < end)
+        candidates = sorted(
+            a.stamp_ns for a in fixes if a.accepted and a.in_map and kidnap <= a.stamp_ns < end
+        )
         good = [
             s for s, r in zip(candidates, rows_after(stamps_ns, candidates), strict=True) if ok[r]
         ]

@@ -25,7 +25,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tagloc.eval.fixstats import AcceptanceBin
-from tagloc.eval.protocol import EvalConfig
+from tagloc.eval.protocol import EvalConfig, Reliability
 from tagloc.eval.report_style import CSS as _CSS
 from tagloc.eval.report_style import figure as _img
 from tagloc.eval.report_style import table as _table
@@ -194,17 +194,30 @@ def _estimators_table(s: EvalSummary) -> str:
             name, e.ate_rmse_m, e.ate_max_m, e.rotation_rmse_deg,
             e.rpe.translation_rmse_m if e.rpe else None, e.rpe.rotation_rmse_deg if e.rpe else None,
             e.largest_jump_m, e.largest_jump_deg, e.false_fixes_accepted,
-            r.fraction if r else None, f"{r.n_success} / {r.n_opportunities}" if r else None,
+            r.fraction if r else None, _successes(r) if r else None,
         ])  # fmt: skip
     note = (
         "<p>ATE: APE, translation part, unaligned (odom = map at the start). Reliability: "
         f"camera frames with a tag truly in view within {s.config.opportunity_range_m:g} m "
         "where a fix was accepted and the published pose right after is within "
         f"{s.config.position_tol_m * 100:g} cm / {s.config.rotation_tol_deg:g} deg of truth. "
+        "A frame that sees only an elevator cab's tags (cab) is judged against the cab: a fix "
+        "of the cab's tags accepted and the published pose relative to the cab right after "
+        "within the same tolerance of the true one. "
         "Baseline: map -> odom snapped to every single-tag fix that passed the per-observation "
-        "gates. Jumps exclude (re)initialization snaps.</p>"
+        "gates (nothing in a cab). Jumps exclude (re)initialization snaps.</p>"
     )
     return _table(header, rows) + note
+
+
+def _successes(r: Reliability) -> str:
+    """``successes / opportunities``, by population when some are the cab's."""
+    text = f"{r.n_success} / {r.n_opportunities}"
+    if r.in_cab.n_opportunities:
+        m, c = r.in_map, r.in_cab
+        text += (f" (map {m.n_success} / {m.n_opportunities}, "
+                 f"cab {c.n_success} / {c.n_opportunities})")  # fmt: skip
+    return text
 
 
 def _bins_rows(bins: list[AcceptanceBin], unit: str) -> list[list[object]]:

@@ -16,7 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tagloc.errors import SimulationError
-from tagloc.eval.elevator import RideTruth, elevator_checks
+from tagloc.eval.elevator import RideTruth, cab_truth, elevator_checks
 from tagloc.geometry import SE3
 from tagloc.localize.config import LocalizerConfig
 from tagloc.localize.driver import record_run
@@ -124,8 +124,11 @@ def localize_scenario(
     run.kidnaps_ns = list(scenario.kidnaps_ns)
     run.metadata.update(scenario_metadata(scenario, source))
     run.metadata["lidar_used"] = use_lidar
-    if run.cab_moves and scenario.world.has_floors:  # rides: their checks, against the truth
-        run.metadata["ride_checks"] = [list(c) for c in elevator_checks(run, ride_truth(scenario))]
+    if run.cab or (run.cab_moves and scenario.world.has_floors):
+        truth = ride_truth(scenario)
+        run.T_cab_base_truth = cab_truth(run, truth)  # the cab's reliability opportunities
+        if run.cab_moves and scenario.world.has_floors:  # rides: their checks
+            run.metadata["ride_checks"] = [list(c) for c in elevator_checks(run, truth)]
     return run
 
 

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from tagloc.eval.elevator import apply_ride_checks
+from tagloc.eval.elevator import apply_ride_checks, cab_errors, cab_frames_of
 from tagloc.eval.fixstats import (
     acceptance_vs_angle,
     acceptance_vs_range,
@@ -147,10 +147,11 @@ def _score(
         rpe = relative_pose_error(
             traj.stamps_ns, traj.T_map_base_truth, estimate, delta_m=cfg.rpe_delta_m
         )
-        if name != "odometry":
+        if name != "odometry":  # a cab-only frame is judged against the cab (the baseline has none)
             reliability = reliability_protocol(
                 run.frames, traj.stamps_ns, errors, cfg,
                 accepted_per_frame=baseline_per_frame if name == "baseline" else None,
+                cab_frames=cab_frames_of(run), cab=cab_errors(run) if name == "fused" else None,
             )  # fmt: skip
     false_accepted = None
     if name != "odometry" and any(a.false_detection is not None for a in run.fixes):
