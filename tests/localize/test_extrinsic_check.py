@@ -11,11 +11,8 @@ import numpy as np
 import pytest
 
 from tagloc.geometry import SE3
-from tagloc.localize.extrinsic_check import (
-    ExtrinsicRecorder,
-    check_extrinsics,
-    check_run_extrinsics,
-)
+from tagloc.localize.extrinsic_check import check_extrinsics, check_run_extrinsics
+from tagloc.localize.extrinsic_rig import ExtrinsicRecorder
 from tagloc.localize.intrinsic_check import check_camera
 from tagloc.localize.outputs import Estimate
 from tagloc.localize.run import FixAttempt
@@ -138,9 +135,27 @@ def test_the_streaming_recorder_agrees_with_the_whole_run_in_bounded_memory() ->
     assert np.allclose(check.xi, oracle.xi, atol=1e-9) and check.n_pairs == oracle.n_pairs
     held = recorder.held  # the odometry kept: the window (to twice it), not the drive
     assert held["fixes"] == sum(f.accepted for f in released) and 500 <= held["odometry"] <= 1000
-    capped = ExtrinsicRecorder(max_fixes=40, odometry_window=500)
-    _streamed(capped, stamps, T_odom_base, fixes)
-    assert capped.held["fixes"] == 40
+
+
+def test_the_recorder_and_the_fit_are_bounded_and_still_find_the_misset() -> None:
+    """Past ``max_fixes`` the recorder keeps whole blocks spread over the drive: what it holds
+    after a drive 3 times as long is the same size, and the check on it still finds the
+    mis-set (against the synthetic truth, the same tolerances as on every fix)."""
+    held = []
+    for n in (18_000, 54_000):  # 180 s and 540 s of 100 Hz odometry, 10 Hz fixes
+        stamps, T_map_base, T_odom_base = _planar_drive(seed=9, n=n)
+        used = T_BASE_CAM_TRUE @ SE3.exp(MISSET)
+        recorder = ExtrinsicRecorder(max_fixes=1000, odometry_window=500)
+        _streamed(recorder, stamps, T_odom_base, _fixes(stamps, T_map_base, used, seed=10))
+        held.append(recorder.held)
+        check = recorder.check(used)
+        assert check is not None and check.warning is not None, check
+        assert check.n_fixes <= 1000
+        rot_deg, trans_m = _error(check.T_base_cam_estimate, T_BASE_CAM_TRUE)
+        assert rot_deg < 0.2 and trans_m < 0.01, (rot_deg, trans_m, check.xi)
+    assert held[0]["fixes"] <= 1000 and held[1]["fixes"] <= 1000
+    assert held[1]["numbers"] == held[0]["numbers"], held  # the state does not grow with N
+    assert held[1]["thinning"] > held[0]["thinning"] >= 1
 
 
 def _wheel_scenario(duration_s: float):  # type: ignore[no-untyped-def]

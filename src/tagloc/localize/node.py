@@ -191,6 +191,11 @@ class LocalizerNode:
         return () if self._tags is None else self._tags.camera_names
 
     @property
+    def T_base_cam_by_camera(self) -> dict[str, SE3 | None]:
+        """Each camera's extrinsics in use, by name (None: not known yet)."""
+        return {} if self._tags is None else self._tags.T_base_cam_by_camera
+
+    @property
     def skipped(self) -> Counter[str]:
         """Skipped inputs by reason: the node's (odometry, work without odometry, a clock
         jump) and its fix sources'."""

@@ -102,6 +102,11 @@ class TagSource:
         return self.extrinsics(self._slots[0])
 
     @property
+    def T_base_cam_by_camera(self) -> dict[str, SE3 | None]:
+        """Each camera's extrinsics (given, or the stream's once a frame needed them)."""
+        return {s.name: self.extrinsics(s) for s in self._slots}
+
+    @property
     def camera_names(self) -> tuple[str, ...]:
         """The cameras, in order (``("",)``: the one camera on the node's topics)."""
         return tuple(s.name for s in self._slots)
