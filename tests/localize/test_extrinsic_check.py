@@ -57,28 +57,22 @@ def _planar_drive(seed: int, n: int = 9000) -> tuple[np.ndarray, SE3, SE3]:
 
 
 def _fixes(
-    stamps: np.ndarray, T_map_base: SE3, T_base_cam_used: SE3, seed: int
-) -> list[FixAttempt]:
+    stamps: np.ndarray, T_map_base: SE3, T_base_cam_used: SE3, seed: int, *,
+    true: SE3 = T_BASE_CAM_TRUE, camera: str = "", n_tags: int = 1,
+) -> list[FixAttempt]:  # fmt: skip
     """Fixes at 10 Hz as the node forms them: the (noisy) true camera pose, expressed as
-    ``T_map_base`` through the extrinsics the node was given."""
+    ``T_map_base`` through the extrinsics the node was given (``n_tags``: the tag seen
+    changes every 5 s among that many)."""
     rng = np.random.default_rng(seed)
     sig = np.array([0.01, 0.01, 0.01, 0.005, 0.005, 0.005])
     cov = np.diag(sig**2)
     out = []
     for k in range(0, len(stamps), 10):
-        T_map_cam = T_map_base[k] @ T_BASE_CAM_TRUE @ SE3.exp(rng.normal(0.0, sig))
-        out.append(
-            FixAttempt(
-                int(stamps[k]),
-                "tag:1",
-                (1,),
-                T_map_cam @ T_base_cam_used.inverse(),
-                cov,
-                "accepted",
-                2.0,
-                0.3,
-            )
-        )
+        T_map_cam = T_map_base[k] @ true @ SE3.exp(rng.normal(0.0, sig))
+        tag = 1 + (k // 500) % n_tags
+        out.append(FixAttempt(int(stamps[k]), f"tag:{tag}", (tag,),
+                              T_map_cam @ T_base_cam_used.inverse(), cov, "accepted", 2.0, 0.3,
+                              camera=camera))  # fmt: skip
     return out
 
 
@@ -156,6 +150,59 @@ def test_the_recorder_and_the_fit_are_bounded_and_still_find_the_misset() -> Non
     assert held[0]["fixes"] <= 1000 and held[1]["fixes"] <= 1000
     assert held[1]["numbers"] == held[0]["numbers"], held  # the state does not grow with N
     assert held[1]["thinning"] > held[0]["thinning"] >= 1
+
+
+# ----- a rig of two cameras --------------------------------------------------------------------
+#: A second camera 0.2 m to the first one's right (its x), as on a stereo rig.
+T_BASE_CAM1_TRUE = T_BASE_CAM_TRUE @ SE3.from_rotvec([0.0, 0.0, 0.0], [0.2, 0.0, 0.0])
+
+
+def _rig(used0: SE3, used1: SE3) -> ExtrinsicRecorder:
+    """A recorder fed a drive of a two-camera rig seeing 10 tags, both cameras at each stamp."""
+    stamps, T_map_base, T_odom_base = _planar_drive(seed=11)
+    fixes = sorted(
+        _fixes(stamps, T_map_base, used0, 12, camera="cam0", n_tags=10)
+        + _fixes(stamps, T_map_base, used1, 13, true=T_BASE_CAM1_TRUE, camera="cam1", n_tags=10),
+        key=lambda f: f.stamp_ns,
+    )  # fmt: skip
+    recorder = ExtrinsicRecorder(odometry_window=500)
+    _streamed(recorder, stamps, T_odom_base, fixes)
+    return recorder
+
+
+def test_a_misset_of_one_camera_of_a_rig_warns_for_that_camera_only() -> None:
+    used1 = T_BASE_CAM1_TRUE @ SE3.exp(MISSET)
+    extrinsics = {"cam0": T_BASE_CAM_TRUE, "cam1": used1}
+    verdicts, rig_line = _rig(T_BASE_CAM_TRUE, used1).verdicts(extrinsics)
+    assert verdicts["cam0"].warning is None and rig_line is None
+    assert verdicts["cam1"].warning is not None and verdicts["cam1"].warning.startswith("cam1: ")
+    check = verdicts["cam1"].check
+    assert check is not None
+    rot_deg, trans_m = _error(check.T_base_cam_estimate, T_BASE_CAM1_TRUE)
+    assert rot_deg < 0.2 and trans_m < 0.01, (rot_deg, trans_m)
+    # the relative mounting, measured without the odometry, finds the mis-set too
+    relative = verdicts["cam1"].relative
+    assert relative is not None and not relative.agrees and relative.n_tags == 10
+    truth = ((T_BASE_CAM_TRUE.inverse() @ used1).inverse()
+             @ (T_BASE_CAM_TRUE.inverse() @ T_BASE_CAM1_TRUE)).log()  # fmt: skip
+    assert np.all(np.abs(relative.xi - truth) <= 4.0 * relative.sigma + 1e-4), (relative, truth)
+
+
+def test_a_correction_every_camera_shares_is_laid_on_the_rig() -> None:
+    """The base frame's placement off (1 deg, 3 cm in the base): each camera's own check
+    finds it, their relative mounting agrees with the calibration, so no camera is blamed."""
+    moved = SE3.from_rotvec([0.0, 0.0, math.radians(1.0)], [0.03, 0.0, 0.0])
+    used0, used1 = moved @ T_BASE_CAM_TRUE, moved @ T_BASE_CAM1_TRUE
+    verdicts, rig_line = _rig(used0, used1).verdicts({"cam0": used0, "cam1": used1})
+    assert rig_line is not None and "cam0, cam1" in rig_line
+    for name, true in (("cam0", T_BASE_CAM_TRUE), ("cam1", T_BASE_CAM1_TRUE)):
+        v = verdicts[name]
+        assert v.warning is None and v.shared and v.check is not None
+        assert v.check.warning is not None  # its own check found the correction
+        rot_deg, trans_m = _error(v.check.T_base_cam_estimate, true)
+        assert rot_deg < 0.2 and trans_m < 0.01, (name, rot_deg, trans_m)
+    relative = verdicts["cam1"].relative
+    assert relative is not None and relative.agrees
 
 
 def _wheel_scenario(duration_s: float):  # type: ignore[no-untyped-def]

@@ -41,6 +41,7 @@ from tagloc.units import S_NS
 __all__ = ["ExtrinsicFit", "fit_extrinsics", "significance"]
 
 _F_SCALE = 3.0  # soft-L1 knee, in whitened units
+_MIN_TAGS = 8  # tags at least for the clustering by tag
 _PRIOR = 1e-3  # a weak pull of xi to 0 (1 km / 1000 rad): keeps unobservable directions finite
 
 
@@ -150,18 +151,20 @@ def _sandwich(
     products of the data rows' scores summed by cluster, ``P`` the priors' information (a
     correct noise model gives ``S = H - P`` and the usual inverse). One key array: clusters by
     it; two (blocks, tags): ``S = S_1 + S_2 - S_12`` (two-way clustering, its negative
-    eigenvalues clipped). Returns the covariance and the number of clusters of each key."""
+    eigenvalues clipped), if there are at least ``_MIN_TAGS`` tags (with fewer, the tags' sums
+    are no measure of a spread: one tag's scores sum to about zero at the optimum). Returns
+    the covariance and the numbers of blocks and tags."""
     weight = 1.0 / np.sqrt(1.0 + (fun / _F_SCALE) ** 2)  # soft-L1 rho'
     scores = jac[:n_data] * (np.sqrt(weight[:n_data]) * fun[:n_data])[:, None]
     S, counts = _clustered(scores, keys[0])
-    if len(keys) > 1:
-        S_tag, n_tags = _clustered(scores, keys[1])
+    S_tag, n_tags = _clustered(scores, keys[1]) if len(keys) > 1 else (S, [0])
+    if n_tags[0] >= _MIN_TAGS:
         span = int(keys[1].max()) - int(keys[1].min()) + 1
         both = keys[0] * span + keys[1] - int(keys[1].min())
         S_both, _ = _clustered(scores, both)
         w, V = np.linalg.eigh(0.5 * ((S + S_tag - S_both) + (S + S_tag - S_both).T))
         S = (V * np.clip(w, 0.0, None)) @ V.T
-        counts = [counts[0], n_tags[0]]
+    counts = [counts[0], n_tags[0]]
     P = jac[n_data:].T @ jac[n_data:]
     H_inv = np.linalg.inv(jac.T @ jac)
     full = H_inv @ (S + P) @ H_inv
