@@ -42,7 +42,7 @@ if TYPE_CHECKING:
     from tagloc.geometry import SE3
     from tagloc.io import BagTopic
     from tagloc.localize.config import LocalizerConfig
-    from tagloc.localize.extrinsic_rig import RigVerdict
+    from tagloc.localize.extrinsic_relative import RigVerdict
     from tagloc.localize.node import LocalizerNode, NodeCamera, NodeTopics
     from tagloc.localize.outputs import OutputSink
     from tagloc.messages import Message
