@@ -117,7 +117,7 @@ def soak(scenario: Scenario, source: ScenarioSource, config: LocalizerConfig,
 
     from tagloc.eval.run_report import RunReportSink
     from tagloc.io.node_sinks import RunFilesSink
-    from tagloc.localize.extrinsic_check import ExtrinsicRecorder
+    from tagloc.localize.extrinsic_rig import ExtrinsicRecorder
 
     tmp = tempfile.TemporaryDirectory()
     recorder = ExtrinsicRecorder()

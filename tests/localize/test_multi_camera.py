@@ -40,9 +40,9 @@ def _matrix(T: SE3) -> np.ndarray:
     return M
 
 
-def make_rig() -> Rig:
+def make_rig(duration_s: float = 40.0) -> Rig:
     """The scenario, the back camera's mount, its detections by stamp, and the merged stream."""
-    source = ScenarioSource(build_scenario("default", seed=1, duration_s=40.0))
+    source = ScenarioSource(build_scenario("default", seed=1, duration_s=duration_s))
     cam = source.camera
     turn = SE3.from_trusted(np.diag([-1.0, -1.0, 1.0]), np.zeros(3))
     T_base_back = turn @ source.T_base_cam

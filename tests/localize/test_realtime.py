@@ -254,3 +254,52 @@ def test_simulated_stream_at_speed_20_matches_the_replay_clock(
     assert np.array_equal(realtime.stamps_ns, offline.stamps_ns)
     assert _ate(realtime) <= 1.1 * _ate(offline)
     assert _ate(realtime) < 0.1
+
+
+class _EveryFrameDetector:
+    """Returns the detections of the frame whose index the image carries (no failures)."""
+
+    backend, families = "fake", ("tag36h11",)
+
+    def __init__(self, detections: list[tuple[TagDetection, ...]]) -> None:
+        self.detections = detections
+
+    def detect(self, image_gray: npt.NDArray[np.generic]) -> list[TagDetection]:
+        return list(self.detections[_index_of(image_gray)])
+
+
+def test_the_worker_detects_every_camera_of_a_rig() -> None:
+    """A front and a back camera (``test_multi_camera``'s rig: the back one's corners from
+    OpenCV), each on its own image topic: every frame of both reaches the worker, and each
+    camera's fixes leave as that camera's, about as many as the replay clock's run on the
+    detections themselves gives (oracle), the fused pose matching the simulator's truth."""
+    from test_multi_camera import BACK, make_rig
+
+    from tagloc.localize.node import NodeCamera
+
+    source, T_base_back, _, stream = make_rig()
+    front_topic = source.t.detections
+    images = {front_topic: "/front/image", BACK: "/back/image"}
+    detections: list[tuple[TagDetection, ...]] = []
+    paced: list[tuple[str, Message]] = []
+    for topic, msg in stream:
+        if isinstance(msg, TagDetectionsMsg) and topic in images:
+            image = ImageMsg(msg.stamp_ns, msg.frame_id, _index_image(len(detections)), "mono8")
+            detections.append(msg.detections)
+            paced.append((images[topic], image))
+        else:
+            paced.append((topic, msg))
+    cameras = [NodeCamera("front", front_topic, source.camera, source.T_base_cam, "/front/image"),
+               NodeCamera("back", BACK, source.camera, T_base_back, "/back/image")]  # fmt: skip
+    node = _node(source, cameras=cameras)
+    offline = record_run(node, stream)
+    recorder = RunRecorder()
+    stats = _wall(node, paced, [recorder], speed=4.0, queue_size=len(detections),
+                  detector=_EveryFrameDetector(detections), worker_nice=0)  # fmt: skip
+    assert stats.frames_in == len(detections) and stats.frames_dropped == 0
+    assert stats.detector_errors == 0
+    for camera in ("front", "back"):
+        want = sum(f.accepted for f in offline.fixes if f.camera == camera)
+        got = sum(f.accepted for f in recorder.fixes if f.camera == camera)
+        assert want > 50 and got >= 0.9 * want, (camera, got, want)
+    assert _ate(recorder.run({})) < 0.1

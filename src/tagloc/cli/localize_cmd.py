@@ -42,8 +42,9 @@ if TYPE_CHECKING:
     from tagloc.geometry import SE3
     from tagloc.io import BagTopic
     from tagloc.localize.config import LocalizerConfig
+    from tagloc.localize.extrinsic_relative import RigVerdict
     from tagloc.localize.node import LocalizerNode, NodeCamera, NodeTopics
-    from tagloc.localize.outputs import NodeOutput, OutputSink
+    from tagloc.localize.outputs import OutputSink
     from tagloc.messages import Message
     from tagloc.tags import TagMap
 
@@ -184,28 +185,27 @@ def localize_wired(
     from tagloc.fileutil import atomic_write_text
     from tagloc.io.node_sinks import RunFilesSink
     from tagloc.localize.driver import run
-    from tagloc.localize.extrinsic_check import ExtrinsicRecorder
+    from tagloc.localize.extrinsic_rig import ExtrinsicRecorder
 
     sink = RunFilesSink(out, wired.config.frames.map_frame, bag=bag, name=wired.name)
     extrinsics = ExtrinsicRecorder()
-    judged = _OneCamera(extrinsics, wired.cameras[0] if wired.cameras else "")
     extra: dict[str, object] = {}
     if wired.camera_check is not None:
         extra["camera_check"] = wired.camera_check
     try:
         if realtime is not None:
-            result = run(wired.node, wired.stream, [sink, judged, *sinks], clock="wall",
+            result = run(wired.node, wired.stream, [sink, extrinsics, *sinks], clock="wall",
                          speed=realtime)  # fmt: skip
             assert result.realtime is not None
             extra["realtime"] = result.realtime.to_dict()
             for line in result.realtime.lines():
                 logger.info("%s", line)
         else:
-            result = run(wired.node, wired.stream, [sink, judged, *sinks])
+            result = run(wired.node, wired.stream, [sink, extrinsics, *sinks])
         node = result.node
         _check_frames(node, sink.counts["frames"])
-        check = extrinsics.check(node.T_base_cam)
-        extra["extrinsic_check"] = None if check is None else check.to_dict()
+        verdicts, rig_line = extrinsics.verdicts(node.T_base_cam_by_camera)
+        extra.update(_extrinsic_fields(verdicts, rig_line))
     except BaseException:
         sink.abort()
         raise
@@ -215,8 +215,7 @@ def localize_wired(
         counts.update(wired.skipped)
         metadata["skipped"] = dict(counts)
     written, lines = sink.close({**metadata, **extra})
-    if check is not None and check.warning:
-        lines.append(f"WARNING: {check.warning}")
+    lines += [f"WARNING: {v.warning}" for v in verdicts.values() if v.warning]
     atomic_write_text(out / "localizer.yaml", node.config.to_yaml_text())
     return [*written, out / "localizer.yaml"], lines
 
@@ -237,18 +236,15 @@ class _FirstSeconds:
             yield topic, msg
 
 
-class _OneCamera:
-    """Passes on every output but the fixes of other cameras than ``camera`` (the extrinsic
-    check judges one camera's mounting, the node's first)."""
-
-    def __init__(self, sink: OutputSink, camera: str) -> None:
-        self.sink, self.camera = sink, camera
-
-    def write(self, output: NodeOutput) -> None:
-        from tagloc.localize.run import FixAttempt
-
-        if not isinstance(output, FixAttempt) or output.camera == self.camera:
-            self.sink.write(output)
+def _extrinsic_fields(verdicts: dict[str, RigVerdict], rig_line: str | None) -> dict[str, object]:
+    """``summary.json``'s mounting check: ``extrinsic_check`` (the first camera's, or the one
+    camera's), and on a rig ``extrinsic_check_by_camera`` and ``extrinsic_check_rig``."""
+    first = next(iter(verdicts.values()), None)
+    fields: dict[str, object] = {"extrinsic_check": None if first is None else first.to_dict()}
+    if len(verdicts) > 1:
+        fields["extrinsic_check_by_camera"] = {n: v.to_dict() for n, v in verdicts.items()}
+        fields["extrinsic_check_rig"] = rig_line
+    return fields
 
 
 def _check_frames(node: LocalizerNode, n_frames: int) -> None:

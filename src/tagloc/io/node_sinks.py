@@ -150,7 +150,8 @@ class RunFilesSink:
             "odometry_calibration": metadata.get("odometry_calibration"),
             "fix_decisions": self.decisions.result().to_dict(),
         }  # fmt: skip
-        for key in ("realtime", "extrinsic_check", "camera_check"):
+        for key in ("realtime", "extrinsic_check", "extrinsic_check_by_camera",
+                    "extrinsic_check_rig", "camera_check"):  # fmt: skip
             if key in metadata:
                 out[key] = metadata[key]
         if self._n_truth:
@@ -176,13 +177,18 @@ class RunFilesSink:
                 f"ATE RMSE (unaligned): fused {ate['fused']:.3f} m, odometry only "
                 f"{ate['odometry']:.3f} m"
             )
-        ext = s.get("extrinsic_check")
-        if ext:
-            lines.append(
-                f"extrinsic check: camera mounting off by {ext['rotation_deg']:.2f} deg / "
-                f"{ext['translation_m'] * 100:.1f} cm ({ext['n_pairs']} fix pairs; unobservable: "
-                f"{', '.join(ext['unobservable']) or 'none'})"
-            )
+        by_camera = s.get("extrinsic_check_by_camera") or {"": s.get("extrinsic_check")}
+        for name, ext in by_camera.items():
+            if ext:
+                lines.append(
+                    f"extrinsic check{f' {name}' if name else ''}: camera mounting off by "
+                    f"{ext['rotation_deg']:.2f} deg / {ext['translation_m'] * 100:.1f} cm "
+                    f"({ext['n_pairs']} fix pairs, {math.sqrt(ext['d2']):.1f} sigma of "
+                    f"{math.sqrt(ext['d2_threshold']):.1f}; unobservable: "
+                    f"{', '.join(ext['unobservable']) or 'none'})"
+                )
+        if s.get("extrinsic_check_rig"):
+            lines.append(f"extrinsic check (rig): {s['extrinsic_check_rig']}")
         return lines
 
     def close(self, metadata: dict[str, Any]) -> tuple[list[Path], list[str]]:

@@ -18,16 +18,24 @@ alike, so its uncertainty includes the drift's prior (``sigma_lateral_drift``).
 The warning is a statistical test, not a threshold on the estimate alone: it is raised when
 the observable correction is *significant* (its squared Mahalanobis distance from zero under
 its cluster-robust covariance exceeds Hotelling's ``T^2`` quantile at level ``alpha``, default
-0.001, for the number of ``block_s``-second blocks of the drive; at least ``min_pairs`` pairs
-and ``min_blocks`` blocks) *and* large enough to matter (above 0.5 deg or 2 cm). A correct
-mounting on a drive too short or too noisy to tell gives no warning; so does a small but
-certain correction.
+0.001, for the number of ``block_s``-second blocks of the drive; the clusters are blocks and,
+given each fix's tag, tags; at least ``min_pairs`` pairs and ``min_blocks`` blocks) *and* large
+enough to matter (above 0.5 deg or 2 cm). A correct mounting on a drive too short or too noisy
+to tell gives no warning; so does a small but certain correction.
+
+On a rig each camera is checked on its own fixes (:func:`check_extrinsics_by_camera`,
+:class:`~tagloc.localize.extrinsic_rig.ExtrinsicRecorder`): what is wrong with one camera's
+mounting shows in its check only, while what the odometry or the map get wrong shows in every
+camera's alike (the same correction in the base frame); where cameras see a tag at the same
+instant, their relative mounting is measured without the odometry and compared with the rig's
+calibration (:mod:`tagloc.localize.extrinsic_rig`), and a camera's warning stands only if that
+comparison does not hold it common to the rig.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -37,12 +45,30 @@ import numpy.typing as npt
 from tagloc._types import FloatArray
 from tagloc.geometry import SE3
 from tagloc.localize.extrinsic_fit import fit_extrinsics, significance
-from tagloc.localize.outputs import Estimate, NodeOutput
 from tagloc.localize.run import FixAttempt, LocalizationRun
+from tagloc.units import S_NS
 
-__all__ = ["ExtrinsicCheck", "ExtrinsicRecorder", "check_extrinsics", "check_run_extrinsics"]
+__all__ = [
+    "BLOCK_S",
+    "MAX_FIXES",
+    "ExtrinsicCheck",
+    "check_extrinsics",
+    "check_extrinsics_by_camera",
+    "check_fixes",
+    "check_run_extrinsics",
+    "odometry_at",
+    "pose_rows",
+    "poses_of",
+    "tag_key",
+    "thinned",
+]
 
 _AXES = ("x", "y", "z", "rx", "ry", "rz")
+BLOCK_S = 5.0
+#: Fixes one check fits at most (per camera): past them whole blocks are left out
+#: (:func:`thinned`); the fit's memory grows with them (about 7.5 kB a fix: a 45 MB peak at the
+#: bound, 189 MB for the 23,000 fixes of 700 s at 33 Hz unbounded), never with the drive.
+MAX_FIXES = 6000
 
 
 @dataclass(frozen=True, slots=True)
@@ -71,6 +97,12 @@ class ExtrinsicCheck:
         Blocks of the drive the covariance was measured over.
     lateral_drift : float
         The nuisance sideways drift of the odometry (m per m forward).
+    camera : str
+        The camera checked (``""``: the node's only camera).
+    n_tags : int
+        Tags its fixes came from (the second clustering; 0: time blocks only).
+    n_fixes : int
+        Fixes fitted (after :func:`thinned`).
     """
 
     xi: FloatArray
@@ -86,6 +118,9 @@ class ExtrinsicCheck:
     d2_threshold: float = math.inf
     n_blocks: int = 0
     lateral_drift: float = 0.0
+    camera: str = ""
+    n_tags: int = 0
+    n_fixes: int = 0
 
     @property
     def significant(self) -> bool:
@@ -106,7 +141,8 @@ class ExtrinsicCheck:
             if math.isfinite(s)
         )  # fmt: skip
         return (
-            f"camera extrinsics look off by {self.rotation_deg:.2f} deg / "
+            (f"{self.camera}: " if self.camera else "") + "camera extrinsics look off by "
+            f" {self.rotation_deg:.2f} deg / "
             f"{self.translation_m * 100:.1f} cm (from {self.n_pairs} fix pairs, "
             f"{math.sqrt(self.d2):.1f} sigma; correction in the camera frame: {parts}): "
             "check T_base_cam"
@@ -115,7 +151,8 @@ class ExtrinsicCheck:
     def to_dict(self) -> dict[str, Any]:
         observable = np.isfinite(self.sigma)
         return {
-            "n_pairs": self.n_pairs, "n_blocks": self.n_blocks,
+            "camera": self.camera, "n_fixes": self.n_fixes, "n_pairs": self.n_pairs,
+            "n_blocks": self.n_blocks, "n_tags": self.n_tags,
             "rotation_deg": self.rotation_deg, "translation_m": self.translation_m,
             "odometry_scale": self.odometry_scale, "lateral_drift": self.lateral_drift,
             "correction_cam": {a: float(v) for a, v, o in zip(_AXES, self.xi, observable,
@@ -132,111 +169,68 @@ class ExtrinsicCheck:
         }  # fmt: skip
 
 
-#: One accepted fix as the recorder keeps it (its stamp aside): range, ``T_map_base``
-#: (rotation matrix, translation), its covariance, and the odometry ``T_odom_base`` at its stamp.
-_ROW, _CHUNK = 1 + 12 + 36 + 12, 1024
-
-
-class ExtrinsicRecorder:
-    """A node sink keeping what :func:`check_extrinsics` needs, in bounded memory.
-
-    Fix records reach the sinks a few seconds after their stamps (once no batch decision can
-    revise them), so the recorder keeps the odometry of the last ``odometry_window`` to twice
-    that many samples (100-200 s at 200 Hz) in arrays and, for each accepted fix, one row of 62
-    numbers (the fix's pose and covariance, the odometry interpolated at its stamp). It keeps
-    the first ``max_fixes`` accepted fixes (about 20 minutes of 30 Hz fixes, 18 MB at most): a
-    commissioning check needs minutes of driving, and a node that runs for days must not grow.
-    :attr:`held` counts what it holds.
-    """
-
-    def __init__(self, max_fixes: int = 36_000, odometry_window: int = 20_000) -> None:
-        self.max_fixes, self._window = max_fixes, odometry_window
-        self._rows: list[FloatArray] = []  # chunks of _CHUNK fix rows
-        self._fix_stamps: list[npt.NDArray[np.int64]] = []
-        self._n = 0
-        self._stamps = np.empty(0, dtype=np.int64)
-        self._odom = np.empty((0, 12))
-        self._m = 0  # odometry samples held
-
-    @property
-    def held(self) -> dict[str, int]:
-        """What the recorder holds: accepted fixes, odometry samples, numbers allocated."""
-        numbers = len(self._rows) * _CHUNK * (_ROW + 1) + 13 * len(self._stamps)
-        return {"fixes": self._n, "odometry": self._m, "numbers": numbers}
-
-    def write(self, output: NodeOutput) -> None:
-        if isinstance(output, Estimate):
-            self._odometry(output)
-        elif (
-            isinstance(output, FixAttempt) and output.accepted and output.in_map
-            and self._n < self.max_fixes and self._m
-        ):  # fmt: skip
-            if self._n % _CHUNK == 0:
-                self._rows.append(np.empty((_CHUNK, _ROW)))
-                self._fix_stamps.append(np.empty(_CHUNK, dtype=np.int64))
-            row = self._rows[-1][self._n % _CHUNK]
-            row[0] = output.range_m
-            row[1:13] = _pose_row(output.T_map_base)
-            row[13:49] = np.asarray(output.cov, dtype=np.float64).ravel()
-            self._fix_stamps[-1][self._n % _CHUNK] = output.stamp_ns
-            # the odometry at the fix: between the two samples around its stamp
-            i = int(np.searchsorted(self._stamps[: self._m], output.stamp_ns, side="right"))
-            near = [max(i - 1, 0), min(i, self._m - 1)]
-            row[49:61] = _pose_row(_odometry_at(
-                self._stamps[near], _pose_of(self._odom[near]),
-                np.array([output.stamp_ns], dtype=np.int64),
-            )[0])  # fmt: skip
-            self._n += 1
-
-    def _odometry(self, e: Estimate) -> None:
-        if self._m and e.stamp_ns <= self._stamps[self._m - 1]:
-            self._m = 0  # the clock jumped back: the node started over
-        if self._m == len(self._stamps):
-            if self._m >= 2 * self._window:  # full: keep the newest window
-                keep = slice(self._m - self._window, self._m)
-                self._stamps[: self._window] = self._stamps[keep]
-                self._odom[: self._window] = self._odom[keep]
-                self._m = self._window
-            else:
-                size = min(max(2 * self._m, 1024), 2 * self._window)
-                self._stamps = np.resize(self._stamps, size)
-                self._odom = np.resize(self._odom, (size, 12))
-        self._stamps[self._m] = e.stamp_ns
-        self._odom[self._m] = _pose_row(e.T_odom_base)
-        self._m += 1
-
-    def check(self, T_base_cam: SE3 | None, **options: Any) -> ExtrinsicCheck | None:
-        """:func:`check_extrinsics` over what was recorded (None without extrinsics)."""
-        if T_base_cam is None or self._n < 2:
-            return None
-        stamps = np.concatenate(self._fix_stamps)[: self._n]
-        order = np.argsort(stamps, kind="stable")
-        rows = np.concatenate(self._rows)[: self._n][order]
-        return _check(
-            stamps[order], rows[:, 0], _pose_of(rows[:, 1:13]),
-            rows[:, 13:49].reshape(-1, 6, 6), _pose_of(rows[:, 49:61]), T_base_cam, **options,
-        )  # fmt: skip
-
-
-def _pose_row(T: SE3) -> FloatArray:
+def pose_rows(T: SE3) -> FloatArray:
+    """``(..., 12)``: each pose's rotation matrix (row-major) and translation."""
     return np.concatenate([np.asarray(T.rotation.matrix).ravel(), T.translation], axis=-1)
 
 
-def _pose_of(rows: FloatArray) -> SE3:
+def poses_of(rows: FloatArray) -> SE3:
+    """The poses of :func:`pose_rows`' rows."""
     rows = np.asarray(rows, dtype=np.float64)
     return SE3.from_trusted(rows[..., :9].reshape(*rows.shape[:-1], 3, 3), rows[..., 9:12])
 
 
+def tag_key(fix: FixAttempt) -> int:
+    """The fix's tag for the clustering (its smallest tag id; -1 for none)."""
+    return min(fix.tag_ids) if fix.tag_ids else -1
+
+
+def _tag_keys(fixes: Sequence[FixAttempt]) -> npt.NDArray[np.int64]:
+    return np.array([tag_key(f) for f in fixes], dtype=np.int64)
+
+
+def thinned(
+    stamps: npt.NDArray[np.int64], max_fixes: int, block_s: float = BLOCK_S
+) -> tuple[npt.NDArray[np.bool_], int]:
+    """Which fixes a check of at most ``max_fixes`` keeps, and the level ``L``: the fixes of
+    every ``2**L``-th ``block_s`` block (whole blocks, so pairs and clusters stay as they were
+    within them), for the least ``L`` that keeps at most ``max_fixes``."""
+    block = stamps // max(round(block_s * S_NS), 1)
+    level = 0
+    while True:
+        keep = block % (1 << level) == 0
+        if keep.sum() <= max_fixes or level >= 62:
+            return keep, level
+        level += 1
+
+
 def check_run_extrinsics(
-    run: LocalizationRun, T_base_cam: SE3, **options: Any
+    run: LocalizationRun, T_base_cam: SE3, *, camera: str | None = None, **options: Any
 ) -> ExtrinsicCheck | None:
-    """:func:`check_extrinsics` on a recorded run."""
-    return check_extrinsics(run.fixes, run.stamps_ns, run.T_odom_base, T_base_cam, **options)
+    """:func:`check_extrinsics` on a recorded run (the fixes of ``camera`` only, if given)."""
+    fixes = run.fixes if camera is None else [f for f in run.fixes if f.camera == camera]
+    return check_extrinsics(fixes, run.stamps_ns, run.T_odom_base, T_base_cam, **options)
 
 
-def _odometry_at(
+def check_extrinsics_by_camera(
+    fix_attempts: Sequence[FixAttempt], stamps_ns: npt.NDArray[np.int64], T_odom_base: SE3,
+    T_base_cam_by_camera: Mapping[str, SE3 | None], **options: Any,
+) -> dict[str, ExtrinsicCheck | None]:  # fmt: skip
+    """:func:`check_extrinsics` for each camera of a rig on its own fixes (None for a camera
+    without extrinsics or without a verdict)."""
+    return {
+        name: None if X is None else check_extrinsics(
+            [f for f in fix_attempts if f.camera == name], stamps_ns, T_odom_base, X,
+            camera=name, **options,
+        )
+        for name, X in T_base_cam_by_camera.items()
+    }  # fmt: skip
+
+
+def odometry_at(
     stamps_ns: npt.NDArray[np.int64], T_odom_base: SE3, stamps: npt.NDArray[np.int64]
 ) -> SE3:
+    """The odometry at ``stamps``, interpolated between its samples (clamped at the ends)."""
     s = stamps_ns
     i = np.clip(np.searchsorted(s, stamps, side="right") - 1, 0, len(s) - 1)
     j = np.minimum(i + 1, len(s) - 1)
@@ -249,6 +243,8 @@ def check_extrinsics(
     stamps_ns: npt.NDArray[np.int64],
     T_odom_base: SE3,
     T_base_cam: SE3,
+    *,
+    by_tag: bool = True,
     **options: Any,
 ) -> ExtrinsicCheck | None:
     """Estimate and test the mounting correction from the accepted fixes (module docstring).
@@ -256,14 +252,16 @@ def check_extrinsics(
     Parameters
     ----------
     fix_attempts : sequence of FixAttempt
-        The run's fix attempts (the accepted fixes of the map are used: a cab's fixes are
-        against odometry that rides with the cab).
+        The run's fix attempts of one camera (its accepted fixes of the map are used: a cab's
+        fixes are against odometry that rides with the cab).
     stamps_ns, T_odom_base : (N,) int64, SE3 batch of N
         The odometry, increasing stamps.
     T_base_cam : SE3
         The extrinsics the run used.
+    by_tag : bool
+        Cluster by tag too (module docstring); False: by time blocks only.
     **options
-        Of :func:`_check`.
+        Of :func:`check_fixes`.
 
     Returns
     -------
@@ -274,34 +272,40 @@ def check_extrinsics(
     if len(fixes) < 2 or len(stamps_ns) < 2:
         return None
     stamps = np.array([f.stamp_ns for f in fixes], dtype=np.int64)
-    return _check(
+    return check_fixes(
         stamps, np.array([f.range_m for f in fixes]), SE3.stack([f.T_map_base for f in fixes]),
-        np.stack([f.cov for f in fixes]), _odometry_at(stamps_ns, T_odom_base, stamps),
-        T_base_cam, **options,
+        np.stack([f.cov for f in fixes]), odometry_at(stamps_ns, T_odom_base, stamps),
+        T_base_cam, tag_keys=_tag_keys(fixes) if by_tag else None, **options,
     )  # fmt: skip
 
 
-def _check(
+def check_fixes(
     stamps: npt.NDArray[np.int64], range_m: FloatArray, T_map_base: SE3, cov: FloatArray,
-    T_odom_base: SE3, T_base_cam: SE3, *, min_dt_s: float = 0.5, max_dt_s: float = 4.0,
+    T_odom_base: SE3, T_base_cam: SE3, *, tag_keys: npt.NDArray[np.int64] | None = None,
+    camera: str = "", min_dt_s: float = 0.5, max_dt_s: float = 4.0,
     sigma_translation_m: float = 0.01, sigma_rotation_rad: float = math.radians(0.3),
     sigma_lateral_drift: float = 0.02, warn_rotation_deg: float = 0.5,
     warn_translation_m: float = 0.02, min_pairs: int = 20, min_blocks: int = 12,
-    block_s: float = 5.0, alpha: float = 1e-3, gravity: bool = True,
+    block_s: float = BLOCK_S, alpha: float = 1e-3, gravity: bool = True,
     max_range_m: float = math.inf, sigma_gravity_rad: float = math.radians(0.1),
+    max_fixes: int = MAX_FIXES,
 ) -> ExtrinsicCheck | None:  # fmt: skip
-    """The check on fixes sorted by stamp with the odometry at their stamps.
+    """The check on one camera's fixes sorted by stamp with the odometry at their stamps.
 
-    ``min_dt_s``, ``max_dt_s``: each fix is paired with the first accepted fix at least
-    ``min_dt_s`` later, if within ``max_dt_s``; ``sigma_translation_m``,
+    ``tag_keys``: each fix's tag (:func:`tag_key`; None: time blocks only); ``camera``: named
+    in the warning; ``min_dt_s``, ``max_dt_s``: each fix is paired with the first accepted fix
+    at least ``min_dt_s`` later, if within ``max_dt_s``; ``sigma_translation_m``,
     ``sigma_rotation_rad``: a pair's odometry noise (nominal: the covariance is measured);
     ``sigma_lateral_drift``: prior 1-sigma of the odometry's sideways drift (m per m; 0 for
     odometry known not to crab); ``gravity``: also use "up", the map's z seen in the camera by
     each fix against the odometry's z in the base (both level: a robot on a floor, or
     visual-inertial odometry), with ``sigma_gravity_rad`` per fix; ``block_s``, ``alpha``,
     ``min_pairs``, ``min_blocks``: the test (module docstring); fixes beyond ``max_range_m``
-    are left out."""
+    are left out; beyond ``max_fixes`` fixes, whole blocks are (:func:`thinned`), so the fit's
+    memory is bounded whatever the drive's length."""
     near = range_m <= max_range_m
+    keep, _ = thinned(stamps[near], max_fixes, block_s)
+    near[near] = keep
     if near.sum() < 2:
         return None
     fit = fit_extrinsics(
@@ -309,6 +313,7 @@ def _check(
         min_dt_s=min_dt_s, max_dt_s=max_dt_s, sigma_translation_m=sigma_translation_m,
         sigma_rotation_rad=sigma_rotation_rad, sigma_lateral_drift=sigma_lateral_drift,
         gravity=gravity, sigma_gravity_rad=sigma_gravity_rad, block_s=block_s,
+        tag_keys=None if tag_keys is None else tag_keys[near],
     )  # fmt: skip
     if fit is None or fit.n_pairs < min_pairs or fit.n_blocks < min_blocks:
         return None
@@ -318,5 +323,6 @@ def _check(
     return ExtrinsicCheck(
         xi, sigma, fit.odometry_scale, fit.n_pairs, math.degrees(float(np.linalg.norm(xi[3:]))),
         float(np.linalg.norm(xi[:3])), warn_rotation_deg, warn_translation_m,
-        T_base_cam @ SE3.exp(xi), d2, threshold, fit.n_blocks, fit.lateral_drift,
+        T_base_cam @ SE3.exp(xi), d2, threshold, fit.n_blocks, fit.lateral_drift, camera,
+        fit.n_tags, int(near.sum()),
     )  # fmt: skip

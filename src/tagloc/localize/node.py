@@ -193,6 +193,16 @@ class LocalizerNode:
         return () if self._tags is None else self._tags.camera_names
 
     @property
+    def cameras(self) -> tuple[NodeCamera, ...]:
+        """The cameras and their topics (one, ``""``, on :attr:`topics` if none were given)."""
+        return () if self._tags is None else self._tags.cameras
+
+    @property
+    def T_base_cam_by_camera(self) -> dict[str, SE3 | None]:
+        """Each camera's extrinsics in use, by name (None: not known yet)."""
+        return {} if self._tags is None else self._tags.T_base_cam_by_camera
+
+    @property
     def skipped(self) -> Counter[str]:
         """Skipped inputs by reason: the node's (odometry, work without odometry, a clock
         jump) and its fix sources'."""
@@ -225,19 +235,21 @@ class LocalizerNode:
 
     def feed_frame(
         self, stamp_ns: int, frame_id: str, detections: tuple[TagDetection, ...],
-        fixes: FrameFixes,
+        fixes: FrameFixes, camera: str | None = None,
     ) -> None:  # fmt: skip
-        """A camera frame whose fixes were formed elsewhere (by :meth:`fixer`, on another
-        thread): queued like any frame, applied when the odometry covers its stamp."""
+        """A frame of ``camera`` (None: the first) whose fixes were formed elsewhere (by
+        :meth:`fixer`, on another thread): queued like any frame, applied when the odometry
+        covers its stamp."""
         if self._tags is not None:
-            arrival = self._tags.arrive_fixed(stamp_ns, frame_id, detections, fixes)
+            arrival = self._tags.arrive_fixed(stamp_ns, frame_id, detections, fixes, camera)
             self._arrived(self._sources.index(self._tags), self._tags, arrival)
 
     def fixer(
-        self, stamp_ns: int, frame_id: str
+        self, stamp_ns: int, frame_id: str, camera: str | None = None
     ) -> Callable[[int, tuple[TagDetection, ...]], FrameFixes] | None:
-        """A function that forms a frame's fixes without touching the node's state, for a worker
-        thread (None until the camera model and extrinsics are known). Its orientation prior is
+        """A function that forms a frame's fixes of ``camera`` (None: the first) without
+        touching the node's state, for a worker thread (None until the camera's model and
+        extrinsics are known). Its orientation prior is
         the newest published correction when it runs (the frame may wait behind others: the
         filter has moved on by then) composed with the odometry when the frame arrived."""
         if self._tags is None:
@@ -248,7 +260,7 @@ class LocalizerNode:
             T_map_odom = self.latest_T_map_odom  # the newest correction when the worker runs
             return None if T_map_odom is None or T_odom_base is None else T_map_odom @ T_odom_base
 
-        return self._tags.fixer(stamp_ns, frame_id, self._context(), prior, T_odom_base)
+        return self._tags.fixer(stamp_ns, frame_id, self._context(), prior, T_odom_base, camera)
 
     def finish(self) -> None:
         """Process the work still waiting for odometry and hand on every held record.

@@ -6,18 +6,21 @@ feeds a :class:`~tagloc.localize.node.LocalizerNode` from any message source (an
 
 1. **Pacing.** The record stamped ``t`` is fed at wall time ``start + (t - t0) / speed``
    (``t0``: the first record's stamp); ``speed=None`` or ``inf`` feeds as fast as possible.
-2. **Detection off the main thread.** An ``ImageMsg`` on the node's image topic goes to a
-   bounded queue (``queue_size``); when it is full the *oldest* waiting frame is dropped and
-   counted (a stale frame is worth less than a fresh one). One worker thread, at a lower
-   priority (``worker_nice``), runs the detector (the node's configured backend unless given)
-   and hands back the frame's tags (:mod:`tagloc.localize.realtime_worker`); the main
+2. **Detection off the main thread.** An ``ImageMsg`` on the image topic of any camera of
+   the node's rig (:attr:`LocalizerNode.cameras`; one camera on the node's image topic if none
+   were given) goes to one bounded queue (``queue_size``, shared by the cameras: the detector
+   is one resource); when it is full the *oldest* waiting frame, of whichever camera, is
+   dropped and counted (a stale frame is worth less than a fresh one). One worker thread, at a
+   lower priority (``worker_nice``), runs the detector (the node's configured backend unless
+   given) and hands back the frame's tags (:mod:`tagloc.localize.realtime_worker`); the main
    thread feeds them to the node as a ``TagDetectionsMsg`` (same stamp and ``frame_id``) on
-   the node's detections topic. Once the node can form fixes (camera model and extrinsics
-   known), the worker also computes each frame's fixes (PnP, covariance, gates, with the
-   node's latest estimate as the orientation prior: :meth:`LocalizerNode.fixer`), so the main
-   thread only applies them to the filter. A detector that raises loses that frame: logged,
-   counted.
-   ``TagDetectionsMsg`` records of the source go straight to the node.
+   that camera's detections topic. Once the node can form a camera's fixes (its model and
+   extrinsics known), the worker also computes each of its frames' fixes (PnP, covariance,
+   gates, with the node's latest estimate as the orientation prior:
+   :meth:`LocalizerNode.fixer`), so the main thread only applies them to the filter, as that
+   camera's. A detector that raises loses that frame: logged, counted.
+   ``TagDetectionsMsg`` records of the source, on any camera's detections topic, go straight
+   to the node.
 3. **The node stays single-threaded.** Only the main thread calls ``node.feed``; it never waits
    for the worker while the source runs (odometry is never blocked by detection), only at the
    end: the queue is drained (every waiting frame detected and fed), then ``node.finish()``.
@@ -106,6 +109,11 @@ class _Runner:
         self.node, self.outbox = node, outbox
         self.timing = timing
         self.frames_in = self.dropped = self.errors = self.detections_in = 0
+        cameras = node.cameras
+        #: image topic -> camera, camera -> its detections topic, detections topics
+        self.image_camera = {c.image_topic: c.name for c in cameras if c.image_topic}
+        self.detections_topic = {c.name: c.detections_topic for c in cameras}
+        self.detections_topics = frozenset(self.detections_topic.values())
 
     def feed(self, topic: str, msg: Message, due_s: float) -> None:
         self.timing.feeding(msg.stamp_ns, time.perf_counter(), due_s)
@@ -116,13 +124,15 @@ class _Runner:
         if result.detections is None:
             self.errors += 1
             return
-        image = result.job.msg
+        job = result.job
+        image = job.msg
         if result.fixes is not None:  # computed on the worker: the node applies them
-            self.timing.feeding(image.stamp_ns, time.perf_counter(), result.job.due_s)
-            self.node.feed_frame(image.stamp_ns, image.frame_id, result.detections, result.fixes)
+            self.timing.feeding(image.stamp_ns, time.perf_counter(), job.due_s)
+            self.node.feed_frame(image.stamp_ns, image.frame_id, result.detections, result.fixes,
+                                 job.camera)  # fmt: skip
         else:
             msg = TagDetectionsMsg(image.stamp_ns, image.frame_id, result.detections)
-            self.feed(self.node.topics.detections, msg, result.job.due_s)
+            self.feed(self.detections_topic[job.camera], msg, job.due_s)
         self.timing.frame_fed(image.stamp_ns, result.job.due_s)
 
     def deliver_ready(self) -> None:
@@ -220,16 +230,17 @@ def run_wall(
             run.wait_until(due_s)
             run.deliver_ready()
             # 2. images to the worker (never waiting for it), everything else to the node
-            if isinstance(msg, ImageMsg) and topic == node.topics.image:
+            camera = run.image_camera.get(topic) if isinstance(msg, ImageMsg) else None
+            if isinstance(msg, ImageMsg) and camera is not None:
                 run.frames_in += 1
-                fixer = node.fixer(msg.stamp_ns, msg.frame_id)
-                if inbox.put(DetectionJob(msg, due_s, fixer)) is not None:
+                fixer = node.fixer(msg.stamp_ns, msg.frame_id, camera)
+                if inbox.put(DetectionJob(msg, due_s, fixer, camera)) is not None:
                     run.dropped += 1
                     if run.dropped == 1:
                         logger.info("detector behind: dropped the oldest waiting frame "
                                     "(further drops are counted)")  # fmt: skip
                 continue
-            if isinstance(msg, TagDetectionsMsg) and topic == node.topics.detections:
+            if isinstance(msg, TagDetectionsMsg) and topic in run.detections_topics:
                 run.detections_in += 1
                 run.feed(topic, msg, due_s)
                 run.timing.frame_fed(msg.stamp_ns, due_s)

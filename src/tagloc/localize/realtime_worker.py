@@ -96,12 +96,14 @@ Fixer = Callable[[int, tuple[TagDetection, ...]], FrameFixes]
 
 @dataclass(frozen=True, slots=True)
 class DetectionJob:
-    """A frame for the worker, the wall time (``time.perf_counter``, s) it was due, and the
-    node's fix computation when it is ready (None: the main thread computes the fixes)."""
+    """A frame of ``camera`` (a name of the node's rig; ``""``: its one camera) for the worker,
+    the wall time (``time.perf_counter``, s) it was due, and the node's fix computation when it
+    is ready (None: the main thread computes the fixes)."""
 
     msg: ImageMsg
     due_s: float  # wall time the frame was due, s (perf_counter)
     fixer: Fixer | None = None
+    camera: str = ""
 
 
 @dataclass(frozen=True, slots=True)

@@ -3,8 +3,8 @@
 Frames come from every camera of the rig (:mod:`tagloc.localize.tag_cameras`: the cameras
 given, each on its own topics, or one camera on ``topics``). A frame is pre-detected corners
 (``TagDetectionsMsg``), an image run through the configured detector (``ImageMsg``), or fixes
-formed on a worker thread (:meth:`TagSource.fixer`, :meth:`TagSource.arrive_fixed`; the first
-camera's). It waits in the node's queue until the odometry covers its stamp; then its camera's
+formed on a worker thread (:meth:`TagSource.fixer`, :meth:`TagSource.arrive_fixed`, for the
+camera named). It waits in the node's queue until the odometry covers its stamp; then its camera's
 :class:`~tagloc.localize.fiducial.FiducialFixSource` (built on first use, once the camera
 model, from ``CameraInfoMsg`` unless given, and the extrinsics, from the stream's static
 ``base -> <frame_id>`` unless given, are known) forms its fixes with the filter's estimate as
@@ -30,6 +30,7 @@ from tagloc.errors import TransformLookupError
 from tagloc.geometry import SE3
 from tagloc.localize.config import LocalizerConfig
 from tagloc.localize.fiducial import E_Z, FiducialFixSource, FrameFixes
+from tagloc.localize.fix import LocalizeError
 from tagloc.localize.roi_detector import RegionDetector, RegionStats, region_detector
 from tagloc.localize.run import CameraFrameRecord, FixAttempt
 from tagloc.localize.sources import (
@@ -41,7 +42,7 @@ from tagloc.localize.sources import (
     SourceResult,
     Work,
 )
-from tagloc.localize.tag_cameras import CameraSlot, camera_slots
+from tagloc.localize.tag_cameras import CameraSlot, NodeCamera, camera_slots
 from tagloc.messages import CameraInfoMsg, ImageMsg, Message, TagDetectionsMsg
 from tagloc.supervise import FixSourceSpec
 from tagloc.tags import TagDetection
@@ -102,6 +103,17 @@ class TagSource:
         return self.extrinsics(self._slots[0])
 
     @property
+    def T_base_cam_by_camera(self) -> dict[str, SE3 | None]:
+        """Each camera's extrinsics (given, or the stream's once a frame needed them)."""
+        return {s.name: self.extrinsics(s) for s in self._slots}
+
+    @property
+    def cameras(self) -> tuple[NodeCamera, ...]:
+        """The cameras and their topics, in order (one, ``""``, on the node's topics if none
+        were given)."""
+        return tuple(s.spec for s in self._slots)
+
+    @property
     def camera_names(self) -> tuple[str, ...]:
         """The cameras, in order (``("",)``: the one camera on the node's topics)."""
         return tuple(s.name for s in self._slots)
@@ -131,10 +143,26 @@ class TagSource:
 
     def arrive_fixed(
         self, stamp_ns: int, frame_id: str, detections: tuple[TagDetection, ...],
-        fixes: FrameFixes,
+        fixes: FrameFixes, camera: str | None = None,
     ) -> Arrival:  # fmt: skip
-        """A frame whose fixes were formed elsewhere (by :meth:`fixer`, on another thread)."""
-        return self._frame(_Frame(stamp_ns, frame_id, detections, fixes))
+        """A frame of ``camera`` (None: the first) whose fixes were formed elsewhere (by
+        :meth:`fixer`, on another thread)."""
+        return self._frame(_Frame(stamp_ns, frame_id, detections, fixes, self._slot(camera)))
+
+    def _slot(self, camera: str | None) -> CameraSlot:
+        """The camera named (None: the first).
+
+        Raises
+        ------
+        LocalizeError
+            If no camera has that name.
+        """
+        if camera is None:
+            return self._slots[0]
+        for slot in self._slots:
+            if slot.name == camera:
+                return slot
+        raise LocalizeError(f"no camera {camera!r} (cameras: {', '.join(self.camera_names)})")
 
     def fixes(self, payload: object, context: FixContext) -> SourceResult | None:
         """One frame: its fixes (with the filter's estimate as the prior), refusals, record."""
@@ -206,12 +234,14 @@ class TagSource:
     def fixer(
         self, stamp_ns: int, frame_id: str, context: FixContext,
         prior: Callable[[], SE3 | None], T_odom_base: SE3 | None = None,
+        camera: str | None = None,
     ) -> Fixer | None:  # fmt: skip
-        """A function that forms a frame's fixes without touching any state, for a worker
-        thread (None until the camera model and extrinsics are known); ``prior()`` is called
-        when it runs, for the orientation prior; ``T_odom_base`` (the odometry about the frame's
-        stamp) gives "up" for a gravity-aligned odometry."""
-        slot = self._slots[0]
+        """A function that forms a frame's fixes of ``camera`` (None: the first) without
+        touching any state, for a worker thread (None until the camera's model and extrinsics
+        are known); ``prior()`` is called when it runs, for the orientation prior;
+        ``T_odom_base`` (the odometry about the frame's stamp) gives "up" for a gravity-aligned
+        odometry."""
+        slot = self._slot(camera)
         source = self._fix_source(slot, _Frame(stamp_ns, frame_id, ()), context, quiet=True)
         if source is None:
             return None
