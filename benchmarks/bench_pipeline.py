@@ -23,7 +23,7 @@ process.
 
 One core: the process is pinned to one CPU, ``cv2.setNumThreads(1)``, AprilTag ``nthreads=1``.
 
-Run: ``.venv/bin/python benchmarks/bench_pipeline.py [--seconds 40] [--scenario kidnap] [--json]``
+Run: ``.venv/bin/python benchmarks/bench_pipeline.py [--seconds 60] [--scenario kidnap] [--json]``
 """
 
 from __future__ import annotations
@@ -33,6 +33,7 @@ import json
 import os
 import statistics
 import time
+from collections import Counter
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
@@ -104,13 +105,19 @@ def image_stream(scenario: Scenario) -> Iterator[tuple[str, Message]]:
         yield IMAGE_TOPIC, ImageMsg(msg.stamp_ns, CAMERA_FRAME, frame.image, "mono8")
 
 
-def configs(scenario: Scenario) -> tuple[LocalizerConfig, LocalizerConfig]:
-    """The scenario's calibrated configuration, lidar off: full frame, and predicted regions."""
+def configs(
+    scenario: Scenario, alarm_frames: int | None = None
+) -> tuple[LocalizerConfig, LocalizerConfig]:
+    """The scenario's calibrated configuration, lidar off: full frame, and predicted regions
+    (``alarm_frames``: their ``full_frames_after_alarm``, default the configuration's)."""
     config = calibrated_config(scenario, scenario_config())
     config = config.model_copy(update={"lidar": config.lidar.model_copy(update={"enabled": False})})
     tags = config.tags
     off = tags.model_copy(update={"roi": tags.roi.model_copy(update={"enabled": False})})
-    on = tags.model_copy(update={"roi": tags.roi.model_copy(update={"enabled": True})})
+    update: dict[str, Any] = {"enabled": True}
+    if alarm_frames is not None:
+        update["full_frames_after_alarm"] = alarm_frames
+    on = tags.model_copy(update={"roi": tags.roi.model_copy(update=update)})
     return config.model_copy(update={"tags": off}), config.model_copy(update={"tags": on})
 
 
@@ -141,10 +148,10 @@ class Result:
         return np.array([ns[s] / 1e6 for s in keys])
 
 
-def measure(scenario: Scenario) -> tuple[Result, Result]:
+def measure(scenario: Scenario, alarm_frames: int | None = None) -> tuple[Result, Result]:
     """Both nodes fed the one stream in turn (module docstring)."""
     nodes, results = [], []
-    for config in configs(scenario):
+    for config in configs(scenario, alarm_frames):
         recorder, timer = RunRecorder(), FrameTimer()
         node = LocalizerNode(scenario.tag_map, config, [recorder])
         (tags,) = [s for s in node.fix_sources if isinstance(s, TagSource)]
@@ -179,6 +186,11 @@ def summary(full: Result, roi: Result) -> dict[str, Any]:
         out["full_frame_tracking_ms"] = float(np.median(full.ms(tracked)))
         out["roi_tracking_ms"] = float(np.median(roi.ms(tracked)))
     out["regions"] = roi.run.metadata.get("regions", {})
+    per_tag = [Counter(i for a in r.run.fixes for i in a.tag_ids) for r in (full, roi)]
+    out["tag_observations_lost"] = {
+        str(i): per_tag[0][i] - per_tag[1][i] for i in sorted(per_tag[0] | per_tag[1])
+        if per_tag[0][i] != per_tag[1][i]
+    }  # fmt: skip
     return out
 
 
@@ -209,21 +221,25 @@ def print_table(s: dict[str, Any], full: Result, roi: Result, header: str) -> No
               f"(mean area {100 * (regions['mean_region_area_fraction'] or 0):.1f} % of the "
               f"frame), {regions['frames_full']} full frames {regions['full_frame_reasons']}, "
               f"tags missed {regions['tags_missed']}")  # fmt: skip
+    print(f"tag observations (fixes and refusals) full frame minus regions, by tag: "
+          f"{s['tag_observations_lost'] or 'none'}")  # fmt: skip
     print(f"filter CPU share (eager predict 200 Hz + update 30 Hz): "
           f"{100 * s['filter_cpu_share']:.3f} % of one core")  # fmt: skip
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seconds", type=float, default=40.0, help="stretch of the drive, s")
+    parser.add_argument("--seconds", type=float, default=60.0, help="stretch of the drive, s")
     parser.add_argument("--scenario", default="default", help="a simulator scenario's name")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument("--alarm-frames", type=int, default=None,
+                        help="tags.roi.full_frames_after_alarm of the regions' node")  # fmt: skip
     args = parser.parse_args()
     pinned = pin_one_core()
     cv2.setNumThreads(1)
     scenario = build_scenario(args.scenario, SEED, args.seconds)
     start = time.perf_counter()
-    full, roi = measure(scenario)
+    full, roi = measure(scenario, args.alarm_frames)
     wall_s = time.perf_counter() - start
     s = summary(full, roi)
     s["filter_cpu_share"] = filter_cpu_share()
@@ -231,10 +247,11 @@ def main() -> None:
         print(json.dumps(s))
         return
     load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
+    alarm = "" if args.alarm_frames is None else f", full_frames_after_alarm {args.alarm_frames}"
     print_table(s, full, roi,
-                f"scenario {args.scenario}, first {args.seconds:g} s, seed {SEED}: {s['frames']} "
-                f"images 1280x720 at 30 Hz, both nodes on each ({wall_s:.0f} s wall with "
-                f"rendering); AprilTag nthreads=1, {pinned}; load average {load}")  # fmt: skip
+                f"scenario {args.scenario}{alarm}, first {args.seconds:g} s, seed {SEED}: "
+                f"{s['frames']} images 1280x720 at 30 Hz, both nodes on each ({wall_s:.0f} s "
+                f"wall with rendering); AprilTag nthreads=1, {pinned}; load {load}")  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -16,10 +16,11 @@ __all__ = ["RegionConfig"]
 class RegionConfig(StrictModel):
     """Predicted-region detection (:mod:`tagloc.localize.roi`)."""
 
-    #: Detect in predicted regions (the full frame on the fallback rules below; off by default until
-    #: measured on every scenario with images); the AprilTag
-    #: backend only (another backend always sees the full frame).
-    enabled: bool = False
+    #: Detect in predicted regions (the full frame on the fallback rules below; chosen by
+    #: ``benchmarks/bench_pipeline.py``, see ``docs/detection.md``); the AprilTag backend only
+    #: (another backend always sees the full frame), and the replay clock only (the wall clock's
+    #: detection worker sees the full frame).
+    enabled: bool = True
     #: Every this many camera frames, the full frame (1: always the full frame).
     full_frame_every: int = Field(10, ge=1, le=100_000)
     #: The full frame when frames are further apart than this, s.
