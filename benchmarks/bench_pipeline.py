@@ -51,7 +51,9 @@ from tagloc.localize.run import LocalizationRun
 from tagloc.localize.source_tags import TagSource
 from tagloc.messages import ImageMsg, Message, TagDetectionsMsg
 from tagloc.sim import render_frames
-from tagloc.sim.scenarios import CAMERA_FRAME, Scenario, ScenarioSource, build_scenario
+from tagloc.sim.scenario import Scenario
+from tagloc.sim.scenario_source import CAMERA_FRAME, ScenarioSource
+from tagloc.sim.scenarios import build_scenario
 
 SEED = 1
 IMAGE_TOPIC = "/camera/image"

@@ -18,7 +18,9 @@ from tagloc.localize.roi import mapped_tags
 from tagloc.localize.roi_detector import RegionDetector
 from tagloc.localize.sources import FixContext
 from tagloc.sim import RenderedFrame, render_frames
-from tagloc.sim.scenarios import BASE_FRAME, ODOM_FRAME, Scenario, build_scenario
+from tagloc.sim.scenario import Scenario
+from tagloc.sim.scenario_source import BASE_FRAME, ODOM_FRAME
+from tagloc.sim.scenarios import build_scenario
 from tagloc.tags import TagDetection, make_detector
 
 S = 1_000_000_000
