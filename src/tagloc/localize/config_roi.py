@@ -16,10 +16,11 @@ __all__ = ["RegionConfig"]
 class RegionConfig(StrictModel):
     """Predicted-region detection (:mod:`tagloc.localize.roi`)."""
 
-    #: Detect in predicted regions (the full frame on the fallback rules below; off by default until
-    #: measured on every scenario with images); the AprilTag
-    #: backend only (another backend always sees the full frame).
-    enabled: bool = False
+    #: Detect in predicted regions (the full frame on the fallback rules below; chosen by
+    #: ``benchmarks/bench_pipeline.py``, see ``docs/detection.md``); the AprilTag backend only
+    #: (another backend always sees the full frame), and the replay clock only (the wall clock's
+    #: detection worker sees the full frame).
+    enabled: bool = True
     #: Every this many camera frames, the full frame (1: always the full frame).
     full_frame_every: int = Field(10, ge=1, le=100_000)
     #: The full frame when frames are further apart than this, s.
@@ -41,6 +42,9 @@ class RegionConfig(StrictModel):
     #: Tags predicted smaller than this (side, px) or seen more obliquely than this are not
     #: looked for (the full frame would not find them either).
     min_tag_px: float = Field(10.0, ge=1, le=1e4)
+    #: Tags whose predicted corners fall further outside the image than this (px) are not
+    #: looked for: the full frame does not find a tag cut by the image's edge either.
+    edge_tolerance_px: float = Field(8.0, ge=0, le=1e4)
     max_view_angle_deg: float = Field(85.0, gt=0, le=90)
     #: Decimation of a region: the largest integer up to ``max_quad_decimate`` that leaves the
     #: smallest predicted tag of the region at least ``min_decimated_side_px`` decimated pixels.
@@ -48,3 +52,11 @@ class RegionConfig(StrictModel):
     max_quad_decimate: int = Field(2, ge=1, le=8)
     #: The full frame when the merged regions cover more than this fraction of it.
     max_area_fraction: float = Field(0.6, gt=0, le=1)
+    #: The full frame when a predicted tag's corner sigma exceeds this (px): the prediction is
+    #: too loose for its regions to be worth searching.
+    max_sigma_px: float = Field(80.0, gt=0, le=1e5)
+    #: After the filter gated a fix on the chi-square test, held one for a consistent set or
+    #: re-initialized (the estimate may be wrong: a kidnap), the full frame for this many
+    #: frames; and for the next frame after a region frame that found none of the tags found in
+    #: the frame before it (0: neither).
+    full_frames_after_alarm: int = Field(30, ge=0, le=100_000)

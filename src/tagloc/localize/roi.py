@@ -85,7 +85,7 @@ def mapped_tags(tag_map: TagMap, family: str, map_frame: str) -> tuple[MappedTag
 
 def predict_tags(
     camera: CameraModel, T_map_base: SE3, cov_base: FloatArray, T_base_cam: SE3,
-    tags: Sequence[MappedTag], config: RegionConfig,
+    tags: Sequence[MappedTag], config: RegionConfig, min_decimate: float = 1.0,
 ) -> list[PredictedTag]:  # fmt: skip
     """Project each tag with its uncertainty (module docstring).
 
@@ -100,12 +100,16 @@ def predict_tags(
     T_base_cam : SE3
     tags : sequence of MappedTag
     config : RegionConfig
+    min_decimate : float
+        No region is searched at a smaller decimation (the full frame's: a smaller one would
+        find other quads, and so other corners, than the full frame).
 
     Returns
     -------
     list of PredictedTag
         The tags in front of the camera, facing it within ``max_view_angle_deg``, at least
-        ``min_tag_px`` on a side and whose region meets the image; in the order of ``tags``.
+        ``min_tag_px`` on a side and with every corner in the image (``edge_tolerance_px``
+        outside at most); in the order of ``tags``.
     """
     if not tags:
         return []
@@ -129,12 +133,16 @@ def predict_tags(
         cos_view = -np.sum(normals_cam * centers_cam, axis=1) / distance
     min_cos = math.cos(math.radians(config.max_view_angle_deg))
     width, height = camera.width, camera.height
+    edge = config.edge_tolerance_px
+    far_edge = np.array([width - 1 + edge, height - 1 + edge])
     out = []
     for i, tag in enumerate(tags):
         corners = nominal[i]
         if not np.isfinite(corners).all() or not cos_view[i] >= min_cos:
             continue
         if (points_cam[0, 4 * i : 4 * i + 4, 2] <= 0.0).any():
+            continue
+        if (corners < -edge).any() or (corners > far_edge).any():
             continue
         side = float(np.linalg.norm(corners - np.roll(corners, -1, axis=0), axis=1).min())
         if side < config.min_tag_px:
@@ -147,7 +155,7 @@ def predict_tags(
         low, high = (corners - margin).min(axis=0), (corners + margin).max(axis=0)
         region = region_around(
             float(low[0]), float(low[1]), float(high[0]), float(high[1]), width, height,
-            quad_decimate(side, config),
+            max(quad_decimate(side, config), min_decimate),
         )  # fmt: skip
         if region is not None:
             out.append(PredictedTag(tag.tag_id, corners, tag_sigma, side, region))

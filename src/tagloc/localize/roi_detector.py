@@ -11,7 +11,15 @@ reason counted in :class:`RegionStats`) when
 - ``periodic``: every ``full_frame_every`` frames;
 - ``gap``: the previous frame is more than ``gap_s`` older;
 - ``no_tag_predicted``: no mapped tag should be in view;
-- ``regions_cover_frame``: the merged regions cover more than ``max_area_fraction``.
+- ``regions_cover_frame``: the merged regions cover more than ``max_area_fraction``;
+- ``covariance_too_large``: a predicted corner's sigma exceeds ``max_sigma_px``;
+- ``inconsistent_fix``: for ``full_frames_after_alarm`` frames after the filter gated a fix on
+  the chi-square test, held one for a consistent set or re-initialized (the estimate may be
+  wrong, as after a kidnap: the regions would be searched in the wrong places);
+- ``predicted_tags_missing``: the region frame before found none of the tags found in the
+  frame before it.
+
+:attr:`RegionDetector.last_reason` says why the last frame used the full frame (None: regions).
 
 ``tags_missed`` counts the tags a full frame found that the region frame just before it did
 not (a tag entering view between the two frames counts too: an upper bound on the misses).
@@ -37,6 +45,7 @@ from tagloc.errors import TaglocError
 from tagloc.geometry import SE3
 from tagloc.localize.config import LocalizerConfig
 from tagloc.localize.config_roi import RegionConfig
+from tagloc.localize.events import EventKind
 from tagloc.localize.roi import MappedTag, mapped_tags, plan_regions, predict_tags
 from tagloc.localize.sources import FixContext
 from tagloc.supervise import Level
@@ -47,6 +56,12 @@ from tagloc.units import S_NS
 __all__ = ["RegionDetector", "RegionStats"]
 
 logger = logging.getLogger(__name__)
+
+#: Filter decisions that say the estimate may be wrong (the ``inconsistent_fix`` reason).
+ALARMS = (
+    EventKind.GATED_CHI2, EventKind.PENDING_CONSISTENCY, EventKind.DISCARDED_CANDIDATE,
+    EventKind.REINITIALIZED_KIDNAP,
+)  # fmt: skip
 
 
 @dataclass(slots=True)
@@ -101,6 +116,9 @@ class RegionDetector:
         self._odom_frame, self._base_frame = odom_frame, base_frame
         self._context: FixContext | None = None
         self.stats = RegionStats()
+        #: Why the last frame used the full frame (a reason of the module docstring; None:
+        #: the regions).
+        self.last_reason: str | None = None
         self.reset()
 
     def observe(self, context: FixContext) -> None:
@@ -113,6 +131,10 @@ class RegionDetector:
         self._last_stamp: int | None = None
         self._since_full = 0
         self._last_region_ids: frozenset[int] | None = None
+        self._alarms_seen = -1  # the filter's alarm count at the last frame (-1: none yet)
+        self._alarm_frames = 0  # full frames still due after an alarm
+        self._all_missing = False  # the last region frame found none of the tags before it
+        self._last_found: frozenset[int] = frozenset()  # the tags the last frame found
 
     def detect(
         self, stamp_ns: int, image: npt.NDArray[np.generic], detector: TagDetector,
@@ -125,12 +147,18 @@ class RegionDetector:
             reason = "no_estimate"
         if reason is None:
             assert camera is not None and T_base_cam is not None
-            regions, reason = self._plan(stamp_ns, camera, T_base_cam)
+            assert isinstance(detector, AprilTagDetector)
+            regions, reason = self._plan(stamp_ns, camera, T_base_cam, detector.quad_decimate)
         self._last_stamp = stamp_ns
+        self.last_reason = reason
         if reason is not None:
             return self._full(image, detector, reason)
         assert isinstance(detector, AprilTagDetector)
         detections = detect_in_regions(detector, image, regions)
+        ids = frozenset(d.tag_id for d in detections)
+        # the tags of the frame before, none found now: the estimate may have gone wrong
+        self._all_missing = bool(self._last_found) and not ids & self._last_found
+        self._last_found = ids
         height, width = np.shape(image)[:2]
         st = self.stats
         st.frames_regions += 1
@@ -138,7 +166,7 @@ class RegionDetector:
         st.region_area_fraction_sum += sum(r.area_px for r in regions) / float(width * height)
         st.tags_regions += len(detections)
         self._since_full += 1
-        self._last_region_ids = frozenset(d.tag_id for d in detections)
+        self._last_region_ids = ids
         return detections
 
     # ----- internals -------------------------------------------------------------------------
@@ -150,6 +178,16 @@ class RegionDetector:
             return "no_estimate"
         if context.level is not None and context.level >= Level.ODOMETRY_ONLY:
             return "odometry_only"
+        alarms = sum(context.filter.events.count(kind) for kind in ALARMS)
+        if alarms != self._alarms_seen:
+            if self._alarms_seen >= 0:
+                self._alarm_frames = self._config.full_frames_after_alarm
+            self._alarms_seen = alarms
+        if self._alarm_frames > 0:
+            self._alarm_frames -= 1
+            return "inconsistent_fix"
+        if self._all_missing and self._config.full_frames_after_alarm > 0:
+            return "predicted_tags_missing"
         if self._last_stamp is None or stamp_ns - self._last_stamp > self._config.gap_s * S_NS:
             return "gap"
         if self._since_full + 1 >= self._config.full_frame_every:
@@ -157,15 +195,18 @@ class RegionDetector:
         return None
 
     def _plan(
-        self, stamp_ns: int, camera: CameraModel, T_base_cam: SE3
+        self, stamp_ns: int, camera: CameraModel, T_base_cam: SE3, min_decimate: float
     ) -> tuple[list[PixelRegion], str | None]:
         pose = self._pose(stamp_ns)
         if pose is None:
             return [], "no_estimate"
         T_map_base, cov = pose
-        predicted = predict_tags(camera, T_map_base, cov, T_base_cam, self._tags, self._config)
+        predicted = predict_tags(camera, T_map_base, cov, T_base_cam, self._tags, self._config,
+                                 min_decimate)  # fmt: skip
         if not predicted:
             return [], "no_tag_predicted"
+        if max(float(p.sigma_px.max()) for p in predicted) > self._config.max_sigma_px:
+            return [], "covariance_too_large"
         regions = plan_regions(predicted, camera.width, camera.height)
         area = sum(r.area_px for r in regions) / float(camera.width * camera.height)
         if area > self._config.max_area_fraction:
@@ -203,6 +244,8 @@ class RegionDetector:
             st.tags_missed += len(ids - self._last_region_ids)
         self._last_region_ids = None
         self._since_full = 0
+        self._all_missing = False
+        self._last_found = ids
         return detections
 
 
