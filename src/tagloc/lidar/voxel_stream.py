@@ -43,9 +43,9 @@ class VoxelCentroids:
         if not voxel_m > 0.0:
             raise GeometryError(f"voxel_m must be > 0, got {voxel_m}")
         self.voxel_m, self.centred, self.chunk_points = float(voxel_m), centred, chunk_points
-        self._keys = np.empty((0, 3), dtype=np.int64)
-        self._sums = np.empty((0, 3))
-        self._counts = np.empty(0)
+        self._keys: np.ndarray = np.empty((0, 3), dtype=np.int64)
+        self._sums: np.ndarray = np.empty((0, 3))
+        self._counts: np.ndarray = np.empty(0)
         self._pending: list[np.ndarray] = []
         self._n_pending = 0
 
