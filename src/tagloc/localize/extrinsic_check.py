@@ -268,7 +268,9 @@ def check_extrinsics(
     ExtrinsicCheck or None
         None with fewer than ``min_pairs`` pairs or ``min_blocks`` blocks.
     """
-    fixes = sorted((f for f in fix_attempts if f.accepted and f.in_map), key=lambda f: f.stamp_ns)
+    fixes = sorted(
+        (f for f in fix_attempts if f.accepted and f.in_map and f.of_tags), key=lambda f: f.stamp_ns
+    )
     if len(fixes) < 2 or len(stamps_ns) < 2:
         return None
     stamps = np.array([f.stamp_ns for f in fixes], dtype=np.int64)

@@ -127,7 +127,10 @@ class ExtrinsicRecorder:
     def write(self, output: NodeOutput) -> None:
         if isinstance(output, Estimate):
             self._odometry(output)
-        elif isinstance(output, FixAttempt) and output.accepted and output.in_map and self._m:
+        elif (
+            isinstance(output, FixAttempt) and output.accepted and output.in_map and output.of_tags
+            and self._m
+        ):  # fmt: skip
             store = self._stores.get(output.camera)
             if store is None:
                 store = self._stores[output.camera] = _FixStore(self.max_fixes, self._block_s)

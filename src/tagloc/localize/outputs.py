@@ -21,12 +21,14 @@ Every output is one typed record, handed to each :class:`OutputSink` the moment 
   rides on each :class:`Estimate` (``floor``) and a floor change is a ``floor_changed``
   :class:`~tagloc.localize.events.FilterEvent`.
 
-:class:`RunRecorder` is the sink evaluation uses: it keeps everything in memory and assembles a
-:class:`~tagloc.localize.run.LocalizationRun` (a choice of that sink; the node keeps nothing).
+:class:`RunRecorder` is the sink evaluation uses: it keeps everything (spooled to temporary
+files, :mod:`tagloc.localize.spool`) and assembles a :class:`~tagloc.localize.run.
+LocalizationRun` (a choice of that sink; the node keeps nothing).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol, TypeAlias
 
@@ -37,6 +39,7 @@ from tagloc.frames import TransformBuffer
 from tagloc.geometry import SE3
 from tagloc.localize.events import FilterEvent
 from tagloc.localize.run import CabEstimate, CameraFrameRecord, FixAttempt, LocalizationRun
+from tagloc.localize.spool import RecordSpool, RowSpool
 from tagloc.messages import GroundTruthMsg
 from tagloc.supervise import CabTransition, LadderTransition, StatusReport
 
@@ -104,77 +107,122 @@ class OutputSink(Protocol):
 
 
 class RunRecorder:
-    """An in-memory sink for evaluation: :meth:`run` assembles a :class:`LocalizationRun`."""
+    """A sink for evaluation: :meth:`run` assembles a :class:`LocalizationRun`.
+
+    What it keeps grows with the drive, so it keeps it on disk (:mod:`tagloc.localize.spool`,
+    unnamed temporary files): the estimate at each odometry sample and the truth as numeric
+    rows, the fix attempts, camera frames, events and cab estimates as records. :attr:`fixes`,
+    :attr:`frames`, :attr:`events` and :attr:`cab` read the records written so far (read-only
+    sequences); the ladder's moves, the status reports and the cab's moves stay in lists.
+    """
 
     def __init__(self, name: str = "run") -> None:
         self.name = name
-        self._stamps: list[int] = []
-        self._odom: list[SE3] = []
-        self._published: list[SE3] = []
-        self._covs: list[FloatArray] = []
-        self._init: list[bool] = []
-        self._estimate: list[SE3] = []
-        self._truth: dict[int, SE3] = {}
-        self.fixes: list[FixAttempt] = []
-        self.frames: list[CameraFrameRecord] = []
-        self.events: list[FilterEvent] = []
+        self._stamps = RowSpool("stamps", 1, np.int64)
+        self._series = {k: RowSpool(k, 12) for k in ("odom", "published", "estimate")}
+        self._covs = RowSpool("cov_map_base", 36)
+        self._init = RowSpool("initialized", 1, np.bool_)
+        self._truth_stamps = RowSpool("truth stamps", 1, np.int64)
+        self._truth = RowSpool("truth", 12)
+        self._records: dict[str, RecordSpool[Any]] = {
+            k: RecordSpool(k) for k in ("fixes", "frames", "events", "cab")
+        }
         self.ladder: list[LadderTransition] = []
         self.status: list[StatusReport] = []
-        self.cab: list[CabEstimate] = []
         self.cab_moves: list[CabTransition] = []
         self._floors: list[str | None] = []
+
+    @property
+    def fixes(self) -> Sequence[FixAttempt]:
+        """The fix attempts recorded so far."""
+        return self._records["fixes"].records()
+
+    @property
+    def frames(self) -> Sequence[CameraFrameRecord]:
+        return self._records["frames"].records()
+
+    @property
+    def events(self) -> Sequence[FilterEvent]:
+        return self._records["events"].records()
+
+    @property
+    def cab(self) -> Sequence[CabEstimate]:
+        return self._records["cab"].records()
 
     def write(self, output: NodeOutput) -> None:
         if isinstance(output, Estimate):
             self._stamps.append(output.stamp_ns)
-            self._odom.append(output.T_odom_base)
-            self._published.append(output.T_map_odom)
-            self._covs.append(_NAN6 if output.cov_map_base is None else output.cov_map_base)
-            self._init.append(output.initialized)
             est = output.T_map_odom_estimate
-            self._estimate.append(output.T_map_odom if est is None else est)
+            for key, T in (("odom", output.T_odom_base), ("published", output.T_map_odom),
+                           ("estimate", output.T_map_odom if est is None else est)):  # fmt: skip
+                self._series[key].append(_pose_row(T))
+            self._covs.append((_NAN6 if output.cov_map_base is None else output.cov_map_base)
+                              .reshape(36))  # fmt: skip
+            self._init.append(output.initialized)
             self._floors.append(output.floor)
         elif isinstance(output, FilterEvent):
-            self.events.append(output)
+            self._records["events"].append(output)
         elif isinstance(output, FixAttempt):
-            self.fixes.append(output)
+            self._records["fixes"].append(output)
         elif isinstance(output, CameraFrameRecord):
-            self.frames.append(output)
+            self._records["frames"].append(output)
         elif isinstance(output, LadderTransition):
             self.ladder.append(output)
         elif isinstance(output, StatusReport):
             self.status.append(output)
         elif isinstance(output, GroundTruthMsg):
-            self._truth[output.stamp_ns] = output.T_frame_child
+            self._truth_stamps.append(output.stamp_ns)
+            self._truth.append(_pose_row(output.T_frame_child))
         elif isinstance(output, CabEstimate):
-            self.cab.append(output)
+            self._records["cab"].append(output)
         elif isinstance(output, CabTransition):
             self.cab_moves.append(output)
 
     def run(self, metadata: dict[str, Any]) -> LocalizationRun:
-        """The recorded run (``metadata``: the node's :meth:`~LocalizerNode.metadata`)."""
-        stamps = np.array(self._stamps, dtype=np.int64)
+        """The recorded run (``metadata``: the node's :meth:`~LocalizerNode.metadata`); its
+        series are read back into arrays, its records stay on disk, read as they are used.
+
+        Raises
+        ------
+        SpoolError
+            If a spool does not read back (a short write, a damaged temporary file).
+        """
+        stamps = self._stamps.read().reshape(-1)
+        poses = {k: _poses(v.read()) for k, v in self._series.items()}
         return LocalizationRun(
-            name=self.name, stamps_ns=stamps, T_odom_base=SE3.stack(self._odom),
-            T_map_odom=SE3.stack(self._published), cov_map_base=np.array(self._covs),
-            initialized=np.array(self._init, dtype=bool), T_map_base_truth=self._truth_at(stamps),
-            fixes=list(self.fixes), frames=list(self.frames), events=list(self.events),
+            name=self.name, stamps_ns=stamps, T_odom_base=poses["odom"],
+            T_map_odom=poses["published"], cov_map_base=self._covs.read().reshape(-1, 6, 6),
+            initialized=self._init.read().reshape(-1), T_map_base_truth=self._truth_at(stamps),
+            fixes=self.fixes, frames=self.frames, events=self.events,
             metadata=metadata, ladder=list(self.ladder),
-            T_map_odom_estimate=SE3.stack(self._estimate) if self._estimate else None,
-            cab=list(self.cab), cab_moves=list(self.cab_moves), floors=list(self._floors),
+            T_map_odom_estimate=poses["estimate"] if len(stamps) else None,
+            cab=self.cab, cab_moves=list(self.cab_moves), floors=list(self._floors),
         )  # fmt: skip
 
     def _truth_at(self, stamps: np.ndarray) -> SE3 | None:
-        if not self._truth:
+        if not len(self._truth):
             return None
-        if all(int(s) in self._truth for s in stamps):
-            return SE3.stack([self._truth[int(s)] for s in stamps])
+        # one truth per stamp, the last written (a stamp sent twice), in stamp order
+        written = self._truth_stamps.read().reshape(-1)
+        rows = self._truth.read()
+        keys, last = np.unique(written[::-1], return_index=True)
+        rows = rows[len(written) - 1 - last]
+        del written
+        at = np.searchsorted(keys, stamps).clip(0, len(keys) - 1)
+        if np.array_equal(keys[at], stamps):
+            return _poses(rows[at])
         buf = TransformBuffer(window_ns=2**62)
-        keys = sorted(self._truth)
-        buf.set_transforms(
-            "truth", "base", np.array(keys), SE3.stack([self._truth[k] for k in keys])
-        )
+        buf.set_transforms("truth", "base", keys, _poses(rows))
         inside = (stamps >= keys[0]) & (stamps <= keys[-1])
         if not inside.all():
             return None
         return buf.lookup_many("truth", "base", stamps)
+
+
+def _pose_row(T: SE3) -> FloatArray:
+    return np.concatenate([np.asarray(T.rotation.matrix).reshape(9), T.translation])
+
+
+def _poses(rows: FloatArray) -> SE3:
+    """A batch from ``(N, 12)`` rows of :func:`_pose_row` (an exact round trip)."""
+    return SE3.from_trusted(rows[:, :9].reshape(-1, 3, 3), rows[:, 9:])

@@ -2,7 +2,9 @@
 
 A :class:`LocalizationRun` is the interface between :mod:`tagloc.localize` (which fills it while
 replaying a message stream: simulator or bag) and :mod:`tagloc.eval` (which scores it). Everything
-is in memory, stamped in integer nanoseconds, with frame names in the field names.
+is stamped in integer nanoseconds, with frame names in the field names; the per-sample series are
+arrays in memory, the records (``fixes``, ``frames``, ``events``, ``cab``) any read-only sequence
+(a recorded run's are read from its spool as they are used: :mod:`tagloc.localize.spool`).
 
 - ``stamps_ns`` / ``T_odom_base`` / ``T_map_odom`` / ``cov_map_base``: one row per odometry
   sample, the filter's published ``map -> odom`` correction at that stamp (identity before the
@@ -26,7 +28,7 @@ is in memory, stamped in integer nanoseconds, with frame names in the field name
 from __future__ import annotations
 
 import math
-from collections.abc import Container, Mapping
+from collections.abc import Container, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -132,6 +134,11 @@ class FixAttempt:
         """Whether the fix is of the map (not of a cab's tags): what ``map -> odom`` used."""
         return not self.frame
 
+    @property
+    def of_tags(self) -> bool:
+        """Whether the fix came from tags in a camera's frame (not from the lidar)."""
+        return self.source.startswith("tag")
+
     def to_row(self) -> dict[str, object]:
         """The ``fixes.jsonl`` row (no pose: the fused trajectory carries the poses; NaN as
         None); :meth:`from_row` reads it back."""
@@ -216,9 +223,9 @@ class LocalizationRun:
         NaN where not initialized.
     initialized : (N,) bool
     T_map_base_truth : SE3 batch of N or None
-    fixes : list of FixAttempt
-    frames : list of CameraFrameRecord
-    events : list of FilterEvent
+    fixes : sequence of FixAttempt
+    frames : sequence of CameraFrameRecord
+    events : sequence of FilterEvent
     kidnaps_ns : list of int
     metadata : dict
         Free-form facts for the report (world, seed, config values, wall time).
@@ -238,14 +245,14 @@ class LocalizationRun:
     cov_map_base: FloatArray
     initialized: npt.NDArray[np.bool_]
     T_map_base_truth: SE3 | None = None
-    fixes: list[FixAttempt] = field(default_factory=list)
-    frames: list[CameraFrameRecord] = field(default_factory=list)
-    events: list[FilterEvent] = field(default_factory=list)
+    fixes: Sequence[FixAttempt] = field(default_factory=list)
+    frames: Sequence[CameraFrameRecord] = field(default_factory=list)
+    events: Sequence[FilterEvent] = field(default_factory=list)
     kidnaps_ns: list[int] = field(default_factory=list)
     metadata: dict[str, object] = field(default_factory=dict)
     ladder: list[LadderTransition] = field(default_factory=list)
     T_map_odom_estimate: SE3 | None = None
-    cab: list[CabEstimate] = field(default_factory=list)
+    cab: Sequence[CabEstimate] = field(default_factory=list)
     cab_moves: list[CabTransition] = field(default_factory=list)
     floors: list[str | None] = field(default_factory=list)
     T_cab_base_truth: SE3 | None = None

@@ -27,7 +27,7 @@ import numpy.typing as npt
 
 from tagloc._types import FloatArray
 from tagloc.geometry import SE3, SO3
-from tagloc.lidar.cloud import voxel_downsample
+from tagloc.lidar.voxel_stream import VoxelCentroids
 from tagloc.messages import PointCloudMsg
 from tagloc.sim.lidar_cast import (
     HIT_FLOOR,
@@ -296,6 +296,7 @@ def premap_from_world(
     travelled = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))])
     marks = np.floor(travelled / every_m)
     picks = np.flatnonzero(np.diff(marks, prepend=-1.0) > 0)
-    clouds = [sim.scan_at(T_map_base[int(i)])[0] for i in picks]
-    merged = np.concatenate(clouds) if clouds else np.zeros((0, 3))
-    return voxel_downsample(merged, voxel_m, centred=True)
+    voxels = VoxelCentroids(voxel_m, centred=True)  # scan by scan: memory grows with the
+    for i in picks:  # ground covered, not with the drive
+        voxels.add(sim.scan_at(T_map_base[int(i)])[0])
+    return voxels.centroids()
