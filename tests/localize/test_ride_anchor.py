@@ -34,6 +34,7 @@ def _exit_errors(seed: int, duration_s: float) -> tuple[list[float], int, int]:
         first = min(
             a.stamp_ns for a in run.fixes
             if a.stamp_ns >= ride.opened_ns and a.tag_ids and a.tag_ids[0] in truth.tag_floor
+            and not a.decision.startswith("rejected")
         )  # fmt: skip
         k = int(np.searchsorted(stamps, first + round(EXIT_AFTER_S * S_NS)))
         d = run.T_map_base[k].translation - run.T_map_base_truth[k].translation
