@@ -15,8 +15,10 @@ import pytest
 from tagloc.eval.elevator import EXIT_AFTER_S, exits
 from tagloc.eval.scenarios import ride_truth, run_scenario
 from tagloc.geometry import SE3
-from tagloc.localize.ride_anchor import CabPlacement, tilt_covariance
+from tagloc.localize.fix import FixQuality, TagFix
+from tagloc.localize.ride_anchor import CabPlacement, LandingSettle, tilt_covariance
 from tagloc.sim.scenarios import build_scenario
+from tagloc.supervise import ElevatorConfig
 from tagloc.units import S_NS
 
 EXIT_TOL_M = 0.05
@@ -92,3 +94,28 @@ def test_the_cab_placement_is_the_information_weighted_mean_of_the_rides() -> No
     assert place.T_floor_cab is not None and place.cov is not None
     np.testing.assert_allclose(place.T_floor_cab.minus(a), 0.8 * b.minus(a), atol=1e-6)
     np.testing.assert_allclose(np.diag(place.cov), 0.8e-4, rtol=1e-4)
+
+
+def test_fixes_of_one_view_count_one_over_n_and_a_near_tag_ends_the_settling() -> None:
+    """Far fixes of one tag from one viewpoint: the n-th gets n times (its covariance plus the
+    view's turn); a new viewpoint starts over; a fix from within ``landing_near_m`` is taken as
+    it is and ends the settling, as does ``landing_settle_m`` of travel."""
+    config = ElevatorConfig()
+    p_tag = np.array([8.0, 0.0, 1.2])
+    settle = LandingSettle(config, odometer_m=100.0, tag_positions_map={27: p_tag})
+    T_map_base = SE3.from_rotvec(np.zeros(3), [1.0, 0.5, 0.0])
+    cov = np.diag([1e-4, 1e-4, 4e-4, 1e-4, 1e-4, 1e-4])
+
+    def fix(range_m: float, stamp_ns: int) -> TagFix:
+        return TagFix(stamp_ns, T_map_base, cov, "tag:27", FixQuality(0.2, 1, range_m))
+
+    tilt = tilt_covariance(T_map_base, p_tag, config.landing_tilt_sigma_rad)
+    for n, odometer_m in [(1, 100.0), (2, 100.2), (3, 100.9), (1, 101.0), (2, 101.5)]:
+        out = settle.weigh(fix(7.0, n), odometer_m)
+        np.testing.assert_allclose(out.cov, n * (cov + tilt), rtol=1e-12)
+    assert not settle.done
+    near = fix(config.landing_near_m - 0.1, 9)
+    assert settle.weigh(near, 102.0) is near and settle.done
+    walked = LandingSettle(config, odometer_m=0.0, tag_positions_map={27: p_tag})
+    far = fix(7.0, 10)
+    assert walked.weigh(far, config.landing_settle_m) is far and walked.done
