@@ -16,7 +16,12 @@ from tagloc.eval.elevator import EXIT_AFTER_S, exits
 from tagloc.eval.scenarios import ride_truth, run_scenario
 from tagloc.geometry import SE3
 from tagloc.localize.fix import FixQuality, TagFix
-from tagloc.localize.ride_anchor import CabPlacement, LandingSettle, tilt_covariance
+from tagloc.localize.ride_anchor import (
+    CabPlacement,
+    LandingSettle,
+    range_covariance,
+    tilt_covariance,
+)
 from tagloc.sim.scenarios import build_scenario
 from tagloc.supervise import ElevatorConfig
 from tagloc.units import S_NS
@@ -98,8 +103,9 @@ def test_the_cab_placement_is_the_information_weighted_mean_of_the_rides() -> No
 
 def test_fixes_of_one_view_count_one_over_n_and_a_near_tag_ends_the_settling() -> None:
     """Far fixes of one tag from one viewpoint: the n-th gets n times (its covariance plus the
-    view's turn); a new viewpoint starts over; a fix from within ``landing_near_m`` is taken as
-    it is and ends the settling, as does ``landing_settle_m`` of travel."""
+    view's turn and range error); a new viewpoint starts over; a fix from within
+    ``landing_near_m`` is taken as it is and ends the settling, as does ``landing_settle_m`` of
+    travel."""
     config = ElevatorConfig()
     p_tag = np.array([8.0, 0.0, 1.2])
     settle = LandingSettle(config, odometer_m=100.0, tag_positions_map={27: p_tag})
@@ -109,13 +115,24 @@ def test_fixes_of_one_view_count_one_over_n_and_a_near_tag_ends_the_settling() -
     def fix(range_m: float, stamp_ns: int) -> TagFix:
         return TagFix(stamp_ns, T_map_base, cov, "tag:27", FixQuality(0.2, 1, range_m))
 
-    tilt = tilt_covariance(T_map_base, p_tag, config.landing_tilt_sigma_rad)
+    sigma = config.landing_tilt_sigma_rad
+    view = tilt_covariance(T_map_base, p_tag, sigma) + range_covariance(T_map_base, p_tag, sigma)
     for n, odometer_m in [(1, 100.0), (2, 100.2), (3, 100.9), (1, 101.0), (2, 101.5)]:
         out = settle.weigh(fix(7.0, n), odometer_m)
-        np.testing.assert_allclose(out.cov, n * (cov + tilt), rtol=1e-12)
+        np.testing.assert_allclose(out.cov, n * (cov + view), rtol=1e-12)
     assert not settle.done
     near = fix(config.landing_near_m - 0.1, 9)
     assert settle.weigh(near, 102.0) is near and settle.done
     walked = LandingSettle(config, odometer_m=0.0, tag_positions_map={27: p_tag})
     far = fix(7.0, 10)
     assert walked.weigh(far, config.landing_settle_m) is far and walked.done
+
+
+def test_the_range_covariance_lies_along_the_line_of_sight() -> None:
+    """The tag straight ahead of the base (its x): only x varies, by (range * sigma)^2."""
+    T_map_base = SE3.from_rotvec([0.0, 0.0, np.pi / 2], [1.0, 1.0, 0.0])  # facing +y in map
+    p_tag = np.array([1.0, 7.0, 1.2])  # 6 m ahead
+    cov = range_covariance(T_map_base, p_tag, 0.1)
+    expected = np.zeros((6, 6))
+    expected[0, 0] = (6.0 * 0.1) ** 2
+    np.testing.assert_allclose(cov, expected, atol=1e-12)

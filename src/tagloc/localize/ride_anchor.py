@@ -19,8 +19,10 @@ sight, but the cab's tags measure the robot relative to the cab (the cab's estim
    ``landing_near_m``): the landing's tags seen from the doors are metres away, head-on, and a
    single tag's orientation is poorly measured there; the fix's error is then a rotation of the
    whole view about the tag's vertical axis, which moves the base by the range times the angle,
-   the same for every fix of that view. Each such fix gets the covariance of that rotation
-   (``landing_tilt_sigma_rad``, :func:`tilt_covariance`) added, and the ``n``-th fix of a tag from
+   the same for every fix of that view, and its range is as poorly known. Each such fix gets the
+   covariance of that rotation and of a range error of the range times the same angle
+   (``landing_tilt_sigma_rad``, :func:`tilt_covariance`, :func:`range_covariance`) added, and
+   the ``n``-th fix of a tag from
    one viewpoint (within ``landing_viewpoint_m`` of travel) counts ``1/n`` of a fix (its
    covariance times ``n``): fixes sharing one error do not add up to certainty
    (:class:`LandingSettle`). They still confirm the floor; they no longer drag the carried pose
@@ -43,7 +45,7 @@ from tagloc.localize.fix import TagFix
 from tagloc.localize.floors import FloorFilter, FloorFrame, tag_ids_of
 from tagloc.supervise import CabState, CabTransition, ElevatorConfig
 
-__all__ = ["CabPlacement", "LandingSettle", "RideAnchor", "tilt_covariance"]
+__all__ = ["CabPlacement", "LandingSettle", "RideAnchor", "range_covariance", "tilt_covariance"]
 
 logger = logging.getLogger(__name__)
 
@@ -91,6 +93,16 @@ def tilt_covariance(T_map_base: SE3, p_map_tag: FloatArray, sigma_rad: float) ->
     return float(sigma_rad) ** 2 * np.outer(J, J)
 
 
+def range_covariance(T_map_base: SE3, p_map_tag: FloatArray, sigma_rad: float) -> FloatArray:
+    """``(6, 6)`` right-tangent covariance of a fix whose range to the tag at ``p_map_tag`` is
+    off by ``N(0, (r * sigma_rad)^2)`` along the horizontal line of sight (``r`` its horizontal
+    range): the far tag's scale is as poorly measured as its turn."""
+    v_base = T_map_base.inverse().act(np.asarray(p_map_tag, dtype=np.float64))
+    out = np.zeros((6, 6))
+    out[:2, :2] = float(sigma_rad) ** 2 * np.outer(v_base[:2], v_base[:2])
+    return out
+
+
 class LandingSettle:
     """Far landing tags' fixes after an exit, weighted for the error a view shares (module
     docstring, step 3). ``weigh`` each map fix; :attr:`done` once settled."""
@@ -122,9 +134,11 @@ class LandingSettle:
         if odometer_m - since_m >= c.landing_viewpoint_m:
             since_m, n = odometer_m, 0
         self._views[tag_id] = (since_m, n + 1)
-        tilt = tilt_covariance(fix.T_map_base, self._tags[tag_id], c.landing_tilt_sigma_rad)
+        p_tag, sigma = self._tags[tag_id], c.landing_tilt_sigma_rad
+        view = tilt_covariance(fix.T_map_base, p_tag, sigma)
+        view += range_covariance(fix.T_map_base, p_tag, sigma)
         self.weighed += 1
-        return dataclasses.replace(fix, cov=(n + 1) * (np.asarray(fix.cov) + tilt))
+        return dataclasses.replace(fix, cov=(n + 1) * (np.asarray(fix.cov) + view))
 
 
 class RideAnchor:

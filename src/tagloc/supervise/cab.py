@@ -83,8 +83,8 @@ class ElevatorConfig(StrictModel):
     #: The settling ends after this much travel since the exit (m).
     landing_settle_m: float = Field(10.0, ge=0, le=1000)
     #: 1-sigma of a far single tag's orientation about its vertical axis (rad): the fix's base
-    #: moves by the range times it.
-    landing_tilt_sigma_rad: float = Field(0.05, ge=0, le=1.0)
+    #: moves sideways by the range times it; its range is off by as much.
+    landing_tilt_sigma_rad: float = Field(0.15, ge=0, le=1.0)
     #: Fixes of one tag within this much travel (m) share one view: the n-th counts 1/n.
     landing_viewpoint_m: float = Field(1.0, gt=0, le=100)
 
