@@ -20,7 +20,8 @@ module feeds them and does what they decide:
   supervisor's ladder, which walks to ``markers_alone`` with the cab's tags carrying);
 - every fix the ``map -> odom`` filter accepts feeds the floor book; the floor it gives (the
   landing's tags after a ride) moves the filter's floor frame (:mod:`tagloc.localize.floors`)
-  and is declared as a ``floor_changed`` event stamped at the first estimate that carries it.
+  and is declared as a ``floor_changed`` event stamped at the first estimate that carries it;
+- the handoff's moves carry the pose in ``map`` through the ride (:mod:`~.ride_anchor`).
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ from tagloc.localize.filter import MapOdomFilter
 from tagloc.localize.fix import LocalizeError
 from tagloc.localize.floors import FloorFrame, floor_table, tag_ids_of
 from tagloc.localize.outputs import Estimate, NodeOutput
+from tagloc.localize.ride_anchor import RideAnchor
 from tagloc.localize.run import CabEstimate
 from tagloc.supervise import CabState, CabTransition, EstimatorState, FloorChange, Supervisor
 from tagloc.tags import TagDetection, TagMap
@@ -79,11 +81,16 @@ class Elevators:
     def __init__(
         self, tag_map: TagMap, config: LocalizerConfig, supervisor: Supervisor,
         floors: FloorFrame, cab_frames: tuple[str, ...], emit: Callable[[NodeOutput], None],
+        main: Callable[[], MapOdomFilter] | None = None,
     ) -> None:  # fmt: skip
         self._tag_map, self._config, self._supervisor = tag_map, config, supervisor
         self.floors, self.cab_frames, self._emit = floors, cab_frames, emit
         family, map_frame = config.tags.family, config.frames.map_frame
         self._frame_of = {t.id: t.frame for t in tag_map if t.family == family}
+        self._main = main
+        on_map = {t.id: np.array(t.position, dtype=np.float64) for t in tag_map
+                  if t.family == family and t.frame == map_frame}  # fmt: skip
+        self.anchor = RideAnchor(config.elevators, on_map)
         self._map_frame = map_frame
         self._cab: MapOdomFilter | None = None
         self._cab_frame = ""
@@ -102,14 +109,16 @@ class Elevators:
     def build(
         cls, tag_map: TagMap, config: LocalizerConfig, supervisor: Supervisor,
         floors: FloorFrame | None, emit: Callable[[NodeOutput], None],
+        main: Callable[[], MapOdomFilter] | None = None,
     ) -> Elevators | None:  # fmt: skip
-        """The component, or None for a building without cab tags and floors. Raises
+        """The component, or None for a building without cab tags and floors; ``main`` gives
+        the node's ``map -> odom`` filter (what a ride carries the pose into). Raises
         ``LocalizeError`` as :func:`check_cab_frames`."""
         cabs = check_cab_frames(tag_map, config)
         if not cabs and floors is None:
             return None
         frame = floors or FloorFrame({}, {})
-        return cls(tag_map, config, supervisor, frame, cabs, emit)
+        return cls(tag_map, config, supervisor, frame, cabs, emit, main)
 
     @staticmethod
     def floor_frame(tag_map: TagMap, config: LocalizerConfig) -> FloorFrame | None:
@@ -136,6 +145,10 @@ class Elevators:
         cab.predict(stamp_ns)
         if cab.initialized and handoff is not None and handoff.state.in_cab:
             self._emit(self._cab_estimate(cab, stamp_ns, buffer))
+        book = self._supervisor.floors
+        boarding = handoff is not None and handoff.state is CabState.BOARDING
+        if boarding and self._main is not None and (book is None or book.known):
+            self.anchor.observe(stamp_ns, self._main(), cab, self.floors)  # the cab's pose
 
     def frame(
         self, stamp_ns: int, detections: tuple[TagDetection, ...], buffer: TransformBuffer,
@@ -212,6 +225,7 @@ class Elevators:
             "handoff_transitions": 0 if handoff is None else handoff.transitions,
             "floor": None if book is None else book.floor,
             "floor_changes": 0 if book is None else book.changes, "cab_fixes": self.cab_fixes,
+            "carried_exits": self.anchor.anchored,
         }}  # fmt: skip
 
     # ----- internals -------------------------------------------------------------------------
@@ -224,6 +238,9 @@ class Elevators:
             return
         self._emit(move)
         book = self._supervisor.floors
+        if self._main is not None and self._cab is not None:  # the pose carried by the cab
+            known = book is None or book.known
+            self.anchor.moved(move, self._main(), self._cab, self.floors, known)
         if move.to_state is CabState.IN_CAB:
             self.rides += move.from_state is CabState.BOARDING
             if book is not None:

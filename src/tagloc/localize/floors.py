@@ -20,6 +20,7 @@ import dataclasses
 import re
 from collections import OrderedDict
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
@@ -32,7 +33,7 @@ from tagloc.localize.filter import MapOdomFilter
 from tagloc.localize.fix import CorrectionUpdate, PartialFix, PoseWithCovariance, TagFix
 from tagloc.tags import TagMap
 
-__all__ = ["FloorFilter", "FloorFrame", "floor_table", "tag_ids_of"]
+__all__ = ["FixWeigher", "FloorFilter", "FloorFrame", "floor_table", "tag_ids_of"]
 
 _TAG_IDS = re.compile(r"tags?:([\d,]+)")
 #: Lowered fixes remembered to hand the filter's batch decisions back on the fixes given.
@@ -84,6 +85,15 @@ class FloorFrame:
         return self.height_m if floor is None else self.heights_m[floor]
 
 
+class FixWeigher(Protocol):
+    """Reweighs the fixes for a while (the landing's after a ride,
+    :class:`~tagloc.localize.ride_anchor.LandingSettle`); dropped once ``done``."""
+
+    done: bool
+
+    def weigh(self, fix: TagFix, odometer_m: float) -> TagFix: ...
+
+
 class FloorFilter(MapOdomFilter):
     """The ``map -> odom`` filter in the current floor's frame (module docstring).
 
@@ -93,11 +103,18 @@ class FloorFilter(MapOdomFilter):
         The filter's estimator and policy (as :meth:`MapOdomFilter.from_config` builds them).
     floors : FloorFrame
         Shared with the node, which sets ``floors.height_m`` on a floor change.
+
+    Attributes
+    ----------
+    weigher : FixWeigher or None
+        Set by the node after a ride: every fix passes through it (before it is lowered) until
+        it is done.
     """
 
     def __init__(self, base: MapOdomFilter, floors: FloorFrame) -> None:
         super().__init__(base.estimator, base.policy)
         self.floors = floors
+        self.weigher: FixWeigher | None = None
         # id(lowered) -> (lowered, the fix given): the lowered one kept alive, so ids stay unique
         self._given: OrderedDict[int, tuple[TagFix, TagFix]] = OrderedDict()
 
@@ -142,11 +159,16 @@ class FloorFilter(MapOdomFilter):
                                   cov)  # fmt: skip
 
     def update(self, fix: TagFix) -> FilterEvent:
+        given, weigher = fix, self.weigher
+        if weigher is not None:
+            fix = weigher.weigh(fix, self.estimator.odometer_m)
+            if weigher.done:
+                self.weigher = None
         h = self.floors.lower_height(fix.source)
-        if h == 0.0:
+        if h == 0.0 and fix is given:
             return super().update(fix)
         lowered = dataclasses.replace(fix, T_map_base=self.floors.lift(fix.T_map_base, -h))
-        self._given[id(lowered)] = (lowered, fix)
+        self._given[id(lowered)] = (lowered, given)
         while len(self._given) > _REMEMBERED:
             self._given.popitem(last=False)
         return super().update(lowered)

@@ -134,7 +134,9 @@ class LocalizerNode:
             cfg.supervisor, [s.spec for s in self._sources], cfg.gates.gap_s, cfg.gates.gap_m,
             cfg.elevators if cabs or floors else None, None if floors is None else floors.heights_m,
         )
-        self._elevators = Elevators.build(tag_map, cfg, self.supervisor, floors, self._emit)
+        self._elevators = Elevators.build(
+            tag_map, cfg, self.supervisor, floors, self._emit, lambda: self._fusion.filter
+        )
         self._queue = WorkQueue()
         self._skipped = SkipCounter()
         self._decisions = FixDecisions(cfg, self.supervisor, self._emit)

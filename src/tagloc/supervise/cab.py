@@ -72,6 +72,21 @@ class ElevatorConfig(StrictModel):
     floor_change_fixes: int = Field(10, ge=1, le=10_000)
     #: 1-sigma of z added to the published pose's covariance while the floor is unknown (m).
     unknown_floor_sigma_m: float = Field(10.0, gt=0, le=1e4)
+    #: On exit, set the pose in ``map`` to the one carried from the cab: the robot's pose in the
+    #: cab (the cab's tags) composed with the cab's pose measured when the doors closed (a shaft
+    #: is vertical). False: the landing's tags alone re-acquire it.
+    carry_through_ride: bool = True
+    #: After an exit, landing tags' fixes from farther than this (m) are weighed for the error
+    #: one view shares (``landing_tilt_sigma_rad``, ``landing_viewpoint_m``); a fix from
+    #: within it ends the settling.
+    landing_near_m: float = Field(3.0, gt=0, le=100)
+    #: The settling ends after this much travel since the exit (m).
+    landing_settle_m: float = Field(10.0, ge=0, le=1000)
+    #: 1-sigma of a far single tag's orientation about its vertical axis (rad): the fix's base
+    #: moves sideways by the range times it; its range is off by as much.
+    landing_tilt_sigma_rad: float = Field(0.15, ge=0, le=1.0)
+    #: Fixes of one tag within this much travel (m) share one view: the n-th counts 1/n.
+    landing_viewpoint_m: float = Field(1.0, gt=0, le=100)
 
     @model_validator(mode="after")
     def _frames(self) -> ElevatorConfig:
