@@ -1,5 +1,5 @@
 """The timeline of a run's elevator rides and the drive picture per floor, against the
-simulator's ride schedule and truth.
+simulator's ride schedule and truth (a flat world's picture keeps its one panel).
 
 The run: the ``elevator`` scenario's first 155 s (two rides, 0 -> 1 and 1 -> 2, the building
 publishing its doors), without lidar. The oracle is the simulator's schedule
@@ -17,14 +17,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tagloc.eval.plots import world_figure
 from tagloc.eval.report import write_report
+from tagloc.eval.report_plots import pyplot
 from tagloc.eval.rides import RideRow, ride_rows
 from tagloc.eval.scenarios import localize_scenario
+from tagloc.geometry import SE3
 from tagloc.io import write_tum
 from tagloc.localize.events import EventKind
 from tagloc.localize.run import LocalizationRun
 from tagloc.sim.ride import RidePlan
 from tagloc.sim.scenarios import Scenario, build_scenario
+from tagloc.sim.world import load_default_world
 from tagloc.supervise import CabState
 
 S = 1_000_000_000
@@ -129,3 +133,58 @@ def test_a_run_without_truth_keeps_the_nodes_times(
         assert (row.boarding_s, row.doors_closed_s, row.doors_open_s, row.exit_s,
                 row.declared_floor, row.declared_s) == (ref.boarding_s, ref.doors_closed_s,
                 ref.doors_open_s, ref.exit_s, ref.declared_floor, ref.declared_s)  # fmt: skip
+
+
+def _line(ax: object, label: str) -> np.ndarray:
+    """The points of the line labelled ``label`` on ``ax`` (NaN: not drawn), (N, 2)."""
+    (line,) = [ln for ln in ax.get_lines() if ln.get_label() == label]  # type: ignore[attr-defined]
+    return np.asarray(line.get_xydata(), dtype=float)
+
+
+@pytest.mark.parametrize("rows", [9000, None])  # 90 s: floors 0 and 1; 155 s: 0, 1 and 2
+def test_the_drive_picture_has_one_panel_per_floor_visited(
+    ride_run: tuple[Scenario, LocalizationRun], rows: int | None
+) -> None:
+    scenario, run = ride_run
+    plan = scenario.drive.plan
+    assert isinstance(plan, RidePlan) and run.T_map_base_truth is not None
+    keep = slice(0, rows)
+    truth, fused = run.T_map_base_truth[keep], run.T_map_base[keep]
+    t_s = (np.asarray(run.stamps_ns)[keep] - scenario.drive.t0_ns) / S
+    on = np.array(plan.floor_at(t_s), dtype=object)  # the schedule's floor (None: riding)
+    fig = world_figure(scenario.world, {"ground truth": truth, "fused": fused})
+    try:
+        axes = [ax for ax in fig.axes if ax.get_title()]
+        visited = [f for f in ("0", "1", "2") if np.any(on == f)]
+        assert len(visited) == (2 if rows else 3)
+        assert [ax.get_title() for ax in axes] == [f"floor {f}" for f in visited]
+        xy_truth = np.asarray(truth.translation)[:, :2]
+        for ax, floor in zip(axes, visited, strict=True):
+            line = _line(ax, "ground truth")
+            drawn = np.isfinite(line).all(axis=1)
+            # every sample the schedule puts on this floor is drawn here, where it is, and none
+            # of the other floors' (samples at a trip's ends, z within 5 cm of the floor, may be)
+            assert drawn[on == floor].all()
+            np.testing.assert_array_equal(line[drawn], xy_truth[drawn])
+            assert not drawn[np.array([f not in (floor, None) for f in on])].any()
+            np.testing.assert_array_equal(np.isfinite(_line(ax, "fused")).all(axis=1), drawn)
+            ids = {t.get_text() for t in ax.texts}
+            floor_tags = next(f for f in scenario.world.floors if f.name == floor).tags
+            assert {str(t.id) for t in floor_tags} <= ids
+            other_tags = {str(t.id) for f in scenario.world.floors if f.name != floor
+                          for t in f.tags}  # fmt: skip
+            assert not ids & other_tags
+    finally:
+        pyplot().close(fig)
+
+
+def test_a_flat_world_keeps_its_one_panel() -> None:
+    world = load_default_world()
+    xy = np.array([[1.0, 1.0, 0.0], [2.0, 1.5, 0.0], [3.0, 2.0, 0.0]])
+    path = SE3.from_rotvec(np.zeros((3, 3)), xy)
+    fig = world_figure(world, {"ground truth": path})
+    try:
+        assert len(fig.axes) == 1 and fig.axes[0].get_title() == world.name
+        np.testing.assert_array_equal(_line(fig.axes[0], "ground truth"), xy[:, :2])
+    finally:
+        pyplot().close(fig)
