@@ -102,12 +102,18 @@ def world_figure(
     visited = [f for f in world.all_floors() if np.any(floor_of == f.name)]
     n = max(len(visited), 1)
     fig, axes = plt.subplots(1, n, figsize=(7.5 * n, 6.5), dpi=110, squeeze=False)
-    for k, (ax, floor) in enumerate(zip(axes[0], visited, strict=False)):
+    for ax, floor in zip(axes[0], visited, strict=False):
         on = floor_of == floor.name
         mine = {name: np.where(on[:, None], v, np.nan) for name, v in xy.items()}
         _draw_panel(ax, world.walls_in_map(floor.name), [*floor.tags, *cab_tags], world, mine,
-                    tag_map, k == n - 1)  # fmt: skip
+                    tag_map, False)  # fmt: skip
         ax.set_title(f"floor {floor.name}")
+    legend: dict[str, Any] = {}  # every panel's entries, once (the cab's walls: its floor's)
+    for ax in axes[0]:
+        for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):
+            legend.setdefault(label, handle)
+    axes[0][-1].legend(list(legend.values()), list(legend), loc="upper left",
+                       bbox_to_anchor=(1.01, 1.0), fontsize=8)  # fmt: skip
     fig.suptitle(title or world.name)
     return fig
 
