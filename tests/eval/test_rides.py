@@ -27,8 +27,9 @@ from tagloc.io import write_tum
 from tagloc.localize.events import EventKind
 from tagloc.localize.run import LocalizationRun
 from tagloc.sim.ride import RidePlan
+from tagloc.sim.route import Waypoint
 from tagloc.sim.scenarios import Scenario, build_scenario
-from tagloc.sim.world import load_default_world
+from tagloc.sim.world import load_builtin_world, load_default_world
 from tagloc.supervise import CabState
 
 S = 1_000_000_000
@@ -186,5 +187,29 @@ def test_a_flat_world_keeps_its_one_panel() -> None:
     try:
         assert len(fig.axes) == 1 and fig.axes[0].get_title() == world.name
         np.testing.assert_array_equal(_line(fig.axes[0], "ground truth"), xy[:, :2])
+    finally:
+        pyplot().close(fig)
+
+
+def test_a_floor_the_cab_only_passes_has_no_panel() -> None:
+    """A ride from floor 0 to floor 2 passes floor 1 (its z crosses 3.5 m in the moving cab):
+    the truth's picture has the panels of floors 0 and 2, where the schedule puts it."""
+    world = load_builtin_world("tower")
+    waypoints = (Waypoint(at="f0_lobby"),
+                 Waypoint.model_validate({"ride": {"elevator": "lift", "to": "2"}}),
+                 Waypoint(at="f2_lobby"))  # fmt: skip
+    route = world.route.model_copy(update={"waypoints": waypoints, "repeat": 1})
+    drive = build_scenario("default", world=world.model_copy(update={"route": route})).drive
+    assert isinstance(drive.plan, RidePlan)
+    on = drive.plan.floor_at((drive.stamps_ns - drive.t0_ns) / S)
+    assert "1" not in on and {"0", "2"} <= set(on)
+    z = np.asarray(drive.T_map_base.translation)[:, 2]
+    assert np.any(np.abs(z - 3.5) < 0.005)  # the cab's samples pass floor 1's height
+    fig = world_figure(world, {"ground truth": drive.T_map_base})
+    try:
+        assert [ax.get_title() for ax in fig.axes] == ["floor 0", "floor 2"]
+        for ax, floor in zip(fig.axes, ("0", "2"), strict=True):
+            drawn = np.isfinite(_line(ax, "ground truth")).all(axis=1)
+            assert drawn[np.array(on, dtype=object) == floor].all()
     finally:
         pyplot().close(fig)

@@ -7,6 +7,7 @@ tags and the part of each path on that floor.
 
 from __future__ import annotations
 
+import itertools
 import os
 from collections.abc import Sequence
 from typing import Any
@@ -30,6 +31,9 @@ _MATERIAL_STYLE = {
 #: A path's sample is on a floor when its z is within this of the floor's height, m (in a
 #: moving cab it is on none).
 ON_FLOOR_M = 0.05
+#: A stretch on a floor moving less than this in x, y (and at neither end of the path) is a cab
+#: passing the floor, m.
+MIN_STRETCH_M = 0.05
 _PATH_COLORS = ["tab:green", "tab:red", "tab:blue", "tab:gray"]
 
 
@@ -71,7 +75,8 @@ def world_figure(
         Trajectories of ``base`` drawn in ``map`` (e.g. ``{"ground truth": T_map_base,
         "odometry": T_odom_base}``), in order; the first is drawn solid, the rest dashed. In a
         building the first path tells the floor of each sample (its z within ``ON_FLOOR_M`` of
-        the floor's height; in a moving cab: none), and every path must have its length.
+        the floor's height; in a moving cab, or passing a floor in one: none), and every path
+        must have its length.
     title : str
     tag_map : TagMap, optional
         A built map: its ``map``-frame tags drawn beside the true ones (a line from the truth),
@@ -119,7 +124,10 @@ def world_figure(
 
 
 def _floor_of_samples(world: World, paths: dict[str, SE3]) -> np.ndarray:
-    """The floor's name of each sample of the first path (``""``: on none)."""
+    """The floor's name of each sample of the first path (``""``: on none). A sample is on a
+    floor when its z is within ``ON_FLOOR_M`` of the floor's height; a stretch of such samples
+    that does not move in x, y (``MIN_STRETCH_M``) and holds neither end of the path is a cab
+    passing the floor, on none."""
     first = next(iter(paths.values()), None)
     if first is None:
         return np.zeros(0, dtype=object)
@@ -127,10 +135,15 @@ def _floor_of_samples(world: World, paths: dict[str, SE3]) -> np.ndarray:
         if len(T) != len(first):
             raise ValueError(f"path {name!r} has {len(T)} samples, the first path {len(first)}: "
                              "in a building every path needs the first's samples")  # fmt: skip
-    z = np.asarray(first.translation)[:, 2]
-    out = np.full(len(z), "", dtype=object)
+    p = np.asarray(first.translation)
+    out = np.full(len(p), "", dtype=object)
     for floor in world.all_floors():
-        out[np.abs(z - floor.height_m) <= ON_FLOOR_M] = floor.name
+        out[np.abs(p[:, 2] - floor.height_m) <= ON_FLOOR_M] = floor.name
+    cuts = np.flatnonzero(out[1:] != out[:-1]) + 1
+    for lo, hi in itertools.pairwise([0, *cuts.tolist(), len(out)]):
+        moved = float(np.sum(np.linalg.norm(np.diff(p[lo:hi, :2], axis=0), axis=1)))
+        if out[lo] and moved < MIN_STRETCH_M and lo > 0 and hi < len(out):
+            out[lo:hi] = ""
     return out
 
 
