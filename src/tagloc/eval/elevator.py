@@ -32,7 +32,10 @@ from tagloc.localize.run import LocalizationRun
 from tagloc.supervise import CabState
 from tagloc.units import S_NS
 
-__all__ = ["RideTruth", "apply_ride_checks", "cab_errors", "cab_truth", "elevator_checks", "exits"]
+__all__ = [
+    "Exit", "RideTruth", "apply_ride_checks", "cab_errors", "cab_truth", "elevator_checks",
+    "exit_error", "exits",
+]  # fmt: skip
 
 #: Targets (issue-free names: what the elevator story promises).
 CAB_RMS_M, EXIT_M, EXIT_AFTER_S = 0.02, 0.05, 1.0
@@ -162,28 +165,38 @@ def apply_ride_checks(
     return out + [make(name, value, target, passed) for name, value, target, passed in rows]
 
 
+def exit_error(run: LocalizationRun, truth: RideTruth, ride: Exit) -> float | None:
+    """The pose error in map ``EXIT_AFTER_S`` after the exit's first landing fix the filter did
+    not reject, m (inf without one; None past the run's end or without the run's truth)."""
+    first = min(
+        (a.stamp_ns for a in run.fixes if a.stamp_ns >= ride.opened_ns and a.tag_ids
+         and a.tag_ids[0] in truth.tag_floor and not a.decision.startswith("rejected")),
+        default=None,
+    )  # fmt: skip
+    if first is None:
+        return math.inf
+    stamps = np.asarray(run.stamps_ns)
+    k = int(np.searchsorted(stamps, first + round(EXIT_AFTER_S * S_NS)))
+    if k >= len(stamps) or run.T_map_base_truth is None:
+        return None
+    return float(np.linalg.norm(run.T_map_base[k].translation
+                                - run.T_map_base_truth[k].translation))  # fmt: skip
+
+
 def _exit_errors(
     run: LocalizationRun, truth: RideTruth, rides: list[Exit]
 ) -> tuple[float, int]:
     """The worst pose error in map 1 s after each exit's first landing fix; exits whose
     published floor is right once back in the map."""
     stamps = np.asarray(run.stamps_ns)
-    T_est = run.T_map_base
     worst, right = -math.inf, 0
     for ride in rides:
-        first = min(
-            (a.stamp_ns for a in run.fixes if a.stamp_ns >= ride.opened_ns and a.tag_ids
-             and a.tag_ids[0] in truth.tag_floor and not a.decision.startswith("rejected")),
-            default=None,
-        )  # fmt: skip
-        if first is None:
-            worst = math.inf
+        e = exit_error(run, truth, ride)
+        if e is None:
             continue
-        k = int(np.searchsorted(stamps, first + round(EXIT_AFTER_S * S_NS)))
-        if k >= len(stamps) or run.T_map_base_truth is None:
-            continue
-        e = float(np.linalg.norm(T_est[k].translation - run.T_map_base_truth[k].translation))
         worst = max(worst, e)
+        if e == math.inf:
+            continue
         j = int(np.searchsorted(stamps, ride.in_map_ns))
         if j < len(stamps) and run.floors:
             published = next((f for f in run.floors[j:] if f is not None), None)

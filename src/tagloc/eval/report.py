@@ -26,6 +26,7 @@ import numpy.typing as npt
 
 from tagloc.eval.fixstats import AcceptanceBin
 from tagloc.eval.protocol import EvalConfig, Reliability
+from tagloc.eval.report_rides import rides_section
 from tagloc.eval.report_style import CSS as _CSS
 from tagloc.eval.report_style import figure as _img
 from tagloc.eval.report_style import table as _table
@@ -110,7 +111,7 @@ def render_html(ev: Evaluation, metadata: dict[str, object]) -> str:
     """The report as one self-contained HTML page."""
     s = ev.summary
     parts = [f"<h1>tagloc evaluation: {html.escape(s.name)}</h1>", _overview(s, metadata)]
-    parts += ["<h2>Checks</h2>", _checks_table(s)]
+    parts += ["<h2>Checks</h2>", _checks_table(s), rides_section(s.rides)]
     parts += ["<h2>Estimates of T_map_base</h2>", _estimators_table(s)]
     if s.has_truth:
         from tagloc.eval import report_plots as plots

@@ -17,6 +17,7 @@ import numpy.typing as npt
 
 from tagloc.errors import SimulationError
 from tagloc.eval.elevator import RideTruth, cab_truth, elevator_checks
+from tagloc.eval.rides import ride_timeline, rows_to_metadata
 from tagloc.geometry import SE3
 from tagloc.localize.config import LocalizerConfig
 from tagloc.localize.driver import record_run
@@ -129,6 +130,7 @@ def localize_scenario(
         run.T_cab_base_truth = cab_truth(run, truth)  # the cab's reliability opportunities
         if run.cab_moves and scenario.world.has_floors:  # rides: their checks
             run.metadata["ride_checks"] = [list(c) for c in elevator_checks(run, truth)]
+            run.metadata["rides"] = rows_to_metadata(ride_timeline(run, truth))
     return run
 
 

@@ -30,6 +30,7 @@ from tagloc.eval.protocol import (
     relocalization_times,
 )
 from tagloc.eval.refusals import fix_decisions
+from tagloc.eval.rides import ride_rows
 from tagloc.eval.summary_types import Check, EstimatorScore, EvalSummary, Evaluation
 from tagloc.eval.supervision import (
     correction_bounds,
@@ -120,6 +121,7 @@ def evaluate(run: LocalizationRun, config: EvalConfig | None = None) -> Evaluati
         bounds=correction_bounds(run),
         checks=[],
         config=cfg,
+        rides=ride_rows(run),
     )
     checks = apply_ride_checks(run, _checks(summary), Check)  # a run through elevator rides
     summary = dataclasses.replace(summary, checks=checks)
@@ -242,7 +244,8 @@ def summary_to_dict(summary: EvalSummary) -> dict[str, Any]:
     ``fixes``, ``fix_decisions``, ``acceptance_vs_range``, ``acceptance_vs_angle``,
     ``n_unknown_range``, ``n_unknown_angle``, ``suspect_sources``, ``kidnaps``,
     ``cap_translation_m``, ``cap_rotation_deg``, ``n_jump_steps_over_cap``, ``ladder``,
-    ``bounds``, ``checks``, ``config``.
+    ``bounds``, ``checks``, ``config``, ``rides`` (one row per elevator ride,
+    :class:`~tagloc.eval.rides.RideRow`).
     """
     out: dict[str, Any] = {"schema_version": SUMMARY_SCHEMA_VERSION}
     for field in dataclasses.fields(summary):

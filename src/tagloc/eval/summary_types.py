@@ -4,13 +4,14 @@ computes them."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from tagloc.eval.fixstats import AcceptanceBin, FixCounts, SuspectSource
 from tagloc.eval.protocol import EvalConfig, KidnapRecovery, Reliability
 from tagloc.eval.refusals import FixDecisions
+from tagloc.eval.rides import RideRow
 from tagloc.eval.supervision import CorrectionBounds, LadderSummary
 from tagloc.eval.trajectories import CorrectionJumps, PoseErrors, RelativeError, RunTrajectories
 
@@ -95,6 +96,8 @@ class EvalSummary:
         and the speed limit bound a publication.
     checks : list of Check
     config : EvalConfig
+    rides : list of RideRow
+        The timeline of the run's elevator rides (:mod:`tagloc.eval.rides`; empty without).
     """
 
     name: str
@@ -118,6 +121,7 @@ class EvalSummary:
     bounds: CorrectionBounds
     checks: list[Check]
     config: EvalConfig
+    rides: list[RideRow] = field(default_factory=list)
 
     @property
     def passed(self) -> bool:
