@@ -141,10 +141,18 @@ class OdometryPath:
 
     def predicted(self, P: FloatArray, motion: PathMotion) -> FloatArray:
         """``F P F^T + Q`` with ``F = [[I, M], [0, I]]`` (the calibration drives the pose;
-        without calibration ``P + Q``)."""
-        if self.calibration is not None:
-            F = np.eye(len(P))
-            F[: self._dof, self._dof :] = motion.M
-            P = F @ P @ F.T
-        out: FloatArray = P + self.full_noise(motion)
+        without calibration ``P + Q``). By blocks (``P = [[P_xx, P_xc], [P_cx, P_cc]]``),
+        which skips the products with ``F``'s identity and zero blocks."""
+        calibration = self.calibration
+        if calibration is None:
+            plain: FloatArray = P + motion.Q
+            return plain
+        d, M = self._dof, motion.M
+        P_xc, P_cx, P_cc = P[:d, d:], P[d:, :d], P[d:, d:]
+        top_right = P_xc + M @ P_cc  # of F P
+        out = np.empty_like(P)
+        out[:d, :d] = P[:d, :d] + M @ P_cx + top_right @ M.T + motion.Q
+        out[:d, d:] = top_right
+        out[d:, :d] = P_cx + P_cc @ M.T
+        out[d:, d:] = P_cc + np.diag(calibration.var_per_m * motion.distance_m)
         return out
