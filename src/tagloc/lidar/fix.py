@@ -177,7 +177,8 @@ def _in_range(points_base: npt.ArrayLike, config: LidarFixConfig) -> np.ndarray:
     keep = (squared >= config.min_range_m**2) & (squared <= config.max_range_m**2)
     if keep.all():  # every point in range: no copy
         return array
-    return array[keep]
+    kept: np.ndarray = array[keep]
+    return kept
 
 
 def _remap(T_map_base_reg: SE3, T_map_base_prior: SE3, basis: np.ndarray) -> SE3:
