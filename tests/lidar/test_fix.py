@@ -141,3 +141,28 @@ def test_a_scan_of_somewhere_else_is_rejected(room_target: Target) -> None:
 def test_points_of_the_wrong_shape_are_refused(room_target: Target) -> None:
     with pytest.raises(GeometryError, match=r"points_base must have shape \(N, 3\)"):
         lidar_fix(np.zeros((500, 2)), room_target, SE3.identity(), LidarFixConfig())
+
+
+def test_a_corridor_askew_to_the_map_axes_keeps_its_null_direction() -> None:
+    """The corridor turned 30 deg in ``map``: its walls' normals are no longer map axes. The
+    point-to-plane information (one distance along each normal) still has no pull along the
+    axis. small_gicp's own Hessian would not do: its ``PLANE_ICP`` residual is ``n * r``
+    element by element, which here reads half the largest translation eigenvalue along the
+    axis (and GICP's regularised covariances constrain the axis even in the straight corridor
+    of the test above), hence the fix's own nearest-neighbour pass at the final pose."""
+    rng = np.random.default_rng(SEED)
+    T_map_corridor = SE3.from_rotvec([0.0, 0.0, np.deg2rad(30.0)], [3.0, -4.0, 0.0])
+    premap = T_map_corridor.act(surface(corridor(60.0), rng, sigma_m=0.003))
+    target = Target.from_points(premap, LidarFixConfig().registration)
+    T_corridor_base = SE3.from_rotvec([0.0, 0.0, 0.3], [2.0, 1.2, 0.5])
+    T_map_base = T_map_corridor.compose(T_corridor_base)
+    offset_map = T_map_corridor.rotation.act(np.array([0.5, 0.1, 0.0]))
+    prior = SE3(rotation=T_map_base.rotation, translation=T_map_base.translation + offset_map)
+    fix = lidar_fix(scan(corridor(), T_corridor_base, rng), target, prior, LidarFixConfig())
+    assert fix.accepted and fix.basis.shape == (6, 5)
+    axis_base = T_corridor_base.rotation.inverse().act(np.array([1.0, 0.0, 0.0]))
+    direction = np.r_[axis_base, 0.0, 0.0, 0.0]
+    assert np.linalg.norm(fix.basis.T @ direction) < 1e-2  # the axis is not constrained
+    across_map = T_map_corridor.rotation.act(np.array([0.0, 1.0, 0.0]))
+    error_map = fix.T_map_base.translation - T_map_base.translation
+    assert abs(error_map @ across_map) < 0.01  # across: corrected (the prior was 0.1 m off)

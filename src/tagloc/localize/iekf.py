@@ -159,11 +159,13 @@ def iterated_update(
     n = len(P0)
     X, c, Pi, m = X0, c0, P0, None
     nu, H, S_inv = innov.nu, innov.H, innov.S_inv
-    J = np.eye(n)
+    J = None  # Jr(e) of the relinearizations, made on the first
     Pr = None if cand.basis is None else projector(cand.Ad_A_inv, cand.basis)
     for i in range(max_iterations):
         if i:  # relinearize at X: prior mean and covariance moved into X's tangent
             e = X.minus(X0)  # type: ignore[arg-type]
+            if J is None:
+                J = np.eye(n)
             J[:dof, :dof] = _jr(e)
             m = -np.concatenate([J[:dof, :dof] @ e, c - c0])
             Pi = J @ P0 @ J.T

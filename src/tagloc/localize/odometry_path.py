@@ -61,6 +61,7 @@ class OdometryPath:
         self.buffer, self.odom_frame, self.base_frame = buffer, odom_frame, base_frame
         self.noise, self.planar, self.calibration = noise, planar, calibration
         self._dof = 3 if planar else 6
+        self._F: FloatArray | None = None  # predicted(): F = [[I, M], [0, I]], M set per call
         self._looked_up: tuple[tuple[int, int], SE3] | None = None  # (stamp, revision), value
         # the last path: ((t_from, t_to, buffer revision, drift), A_from, A_to, result)
         self._last_path: tuple[tuple[int, int, int, bool], SE3, SE3, PathMotion] | None = None
@@ -141,10 +142,18 @@ class OdometryPath:
 
     def predicted(self, P: FloatArray, motion: PathMotion) -> FloatArray:
         """``F P F^T + Q`` with ``F = [[I, M], [0, I]]`` (the calibration drives the pose;
-        without calibration ``P + Q``)."""
-        if self.calibration is not None:
-            F = np.eye(len(P))
-            F[: self._dof, self._dof :] = motion.M
-            P = F @ P @ F.T
-        out: FloatArray = P + self.full_noise(motion)
+        without calibration ``P + Q``). ``F`` is kept between calls (only ``M`` changes) and
+        ``Q`` added in place by blocks: the same floating-point operations as building both."""
+        calibration = self.calibration
+        if calibration is None:
+            plain: FloatArray = P + motion.Q
+            return plain
+        d, n = self._dof, len(P)
+        F = self._F
+        if F is None or len(F) != n:
+            F = self._F = np.eye(n)
+        F[:d, d:] = motion.M
+        out: FloatArray = F @ P @ F.T
+        out[:d, :d] += motion.Q
+        out[d:, d:] += np.diag(calibration.var_per_m * motion.distance_m)
         return out
