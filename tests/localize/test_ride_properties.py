@@ -155,3 +155,22 @@ def test_the_published_correction_jumps_only_at_declared_floor_changes(seed: int
 @pytest.mark.parametrize("seed", [10, 11, 12, 13])
 def test_the_property_holds_over_two_rides_with_the_lidar(seed: int) -> None:
     _check(seed, rides=2, lidar=True)
+
+
+@pytest.mark.parametrize("start", ["1", "2"])
+def test_a_drive_starting_on_an_upper_floor_is_localized_at_its_height(start: str) -> None:
+    """The odometry starts at zero on the floor the robot boots on (as a robot's does): the
+    fused pose's z is the floor's height from the first known floor on, before and after a
+    ride down, within 5 cm of the simulator's truth."""
+    schedule = Schedule(5, (start, "0"), 2.0, 2.0, 2.0, (3.0, 3.0), True)
+    scenario = _scenario(schedule)
+    run = localize_scenario(scenario, lidar=False)
+    known = np.asarray(run.initialized) & np.array([f is not None for f in run.floors])
+    assert known.sum() > 100
+    floors_seen = {f for f, k in zip(run.floors, known, strict=True) if k}
+    assert floors_seen == {start, "0"}
+    dz = np.asarray(run.T_map_base.translation)[:, 2] - np.asarray(
+        run.T_map_base_truth.translation
+    )[:, 2]
+    worst = float(np.max(np.abs(dz[known])))
+    assert worst < 0.05, f"z off by up to {worst:.3f} m while the floor is known"

@@ -134,7 +134,10 @@ def simulate_drive(world: World, seed: int | None = None, *, t0_ns: int = 0) -> 
         t_s = (stamps_ns - np.int64(t0_ns)).astype(np.float64) * 1e-9
         mid = t_s + np.r_[np.diff(t_s), 0.0] / 2  # each interval's middle
         _, _, accel_z = plan.robot_z.evaluate(mid)
+        # the odometry reads the base's height above the floor it started on, as a robot's
+        # odometry that starts at zero does (a planar localizer takes its z for that)
         z0 = float(trajectory.T_map_base.translation[0][2])
+        z0 -= max((h for h in world.floor_heights().values() if h <= z0 + 1e-6), default=0.0)
         T_odom_base = ride_odometry(
             robot.odometry.imu, T_odom_base, t_s, z0, accel_z, plan.robot_z.moving(mid), seed
         )

@@ -3,8 +3,9 @@
 The planar drift models of :mod:`tagloc.sim.odometry` see the feet (or wheels) and nothing else:
 standing in a moving cab they see no motion (the planar increments are zero, so they add no
 error), and they never observe z. So by default the odometry's z stays where it started
-(``T_odom_base`` z = the true z of the first sample) through every ride: ``odom`` and ``map``
-differ by the floor's height after a ride.
+(``T_odom_base`` z = the true z of the first sample above the floor it starts on: a robot's
+odometry starts at zero where it boots) through every ride: ``odom`` and ``map`` differ by the
+start floor's height, and after a ride by the floor's.
 
 An *IMU-fused* odometry (``robot.odometry.imu``, :class:`ImuFusionConfig`: a filter fusing the
 kinematics with an inertial unit) feels the cab accelerate. Its model, with ``a_z`` the cab's
