@@ -164,7 +164,8 @@ class FilterConfig(StrictModel):
     """The estimator itself."""
 
     #: Estimate only x, y, yaw of ``T_map_odom`` (z, roll, pitch pinned at 0; the fixes' z, roll
-    #: and pitch are ignored). For ground robots whose fixes are poor in those axes.
+    #: and pitch are ignored). For ground robots whose fixes are poor in those axes; the odometry's
+    #: z is then the base's height above the floor the odometry started on.
     planar: bool = False
     #: Iterated EKF: relinearize while the step seen at the base, ``|H dx|``, exceeds
     #: ``relinearize_tol`` (m or rad). Skipping it errs by about ``|H dx| |nu| / 2``: under
