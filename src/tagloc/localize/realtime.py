@@ -12,7 +12,12 @@ feeds a :class:`~tagloc.localize.node.LocalizerNode` from any message source (an
    is one resource); when it is full the *oldest* waiting frame, of whichever camera, is
    dropped and counted (a stale frame is worth less than a fresh one). One worker thread, at a
    lower priority (``worker_nice``), runs the detector (the node's configured backend unless
-   given) and hands back the frame's tags (:mod:`tagloc.localize.realtime_worker`); the main
+   given) and hands back the frame's tags (:mod:`tagloc.localize.realtime_worker`). It detects
+   in the regions where the mapped tags are predicted (``tags.roi``,
+   :mod:`tagloc.localize.roi_detector`, with its fallbacks to the full frame: every
+   ``full_frame_every`` frames, after a gap, after an alarming decision, ...), predicted from
+   the node's estimate and state when the frame was handed to the worker (never a later
+   one: :meth:`LocalizerNode.region_detect`); the main
    thread feeds them to the node as a ``TagDetectionsMsg`` (same stamp and ``frame_id``) on
    that camera's detections topic. Once the node can form a camera's fixes (its model and
    extrinsics known), the worker also computes each of its frames' fixes (PnP, covariance,
@@ -233,8 +238,10 @@ def run_wall(
             camera = run.image_camera.get(topic) if isinstance(msg, ImageMsg) else None
             if isinstance(msg, ImageMsg) and camera is not None:
                 run.frames_in += 1
+                # the node's state now, for the fixes' and the regions' computation later
                 fixer = node.fixer(msg.stamp_ns, msg.frame_id, camera)
-                if inbox.put(DetectionJob(msg, due_s, fixer, camera)) is not None:
+                detect = node.region_detect(msg.stamp_ns, camera)
+                if inbox.put(DetectionJob(msg, due_s, fixer, camera, detect)) is not None:
                     run.dropped += 1
                     if run.dropped == 1:
                         logger.info("detector behind: dropped the oldest waiting frame "
@@ -254,6 +261,7 @@ def run_wall(
     finally:
         inbox.close(discard=True)
         worker.join()
+    regions = node.metadata().get("regions") or {}
     stats = RealtimeStats(
         frames_in=run.frames_in, frames_dropped=run.dropped, detector_errors=run.errors,
         detections_in=run.detections_in, odom_to_estimate=timing.odom.summary(),
@@ -262,5 +270,7 @@ def run_wall(
         odom_only_to_estimate=timing.odom_only.summary(),
         image_to_correction=timing.correction.summary(), wall_s=time.perf_counter() - start,
         stream_s=0.0 if t0 is None else (stamp_last - t0) / S_NS, speed=rate,
+        frames_regions=regions.get("frames_regions", 0),
+        full_frame_reasons=dict(regions.get("full_frame_reasons", {})),
     )  # fmt: skip
     return node, stats

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import random
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
@@ -127,6 +127,11 @@ class RealtimeStats:
         Stamp span of the source, s.
     speed : float
         Pacing factor (``inf``: as fast as possible).
+    frames_regions : int
+        Frames the worker detected in predicted regions only (``tags.roi``).
+    full_frame_reasons : dict of str to int
+        The frames it detected in full, by reason (:mod:`tagloc.localize.roi_detector`; empty
+        when ``tags.roi.enabled`` is false).
     """
 
     frames_in: int
@@ -141,6 +146,8 @@ class RealtimeStats:
     wall_s: float
     stream_s: float
     speed: float
+    frames_regions: int = 0
+    full_frame_reasons: dict[str, int] = field(default_factory=dict)
 
     @property
     def drop_fraction(self) -> float:
@@ -166,4 +173,7 @@ class RealtimeStats:
             f"odometry with a frame -> estimate: {self.odom_frame_to_estimate.text()}",
             f"odometry without a frame -> estimate: {self.odom_only_to_estimate.text()}",
             f"image due -> correction: {self.image_to_correction.text()}",
+            f"detection: {self.frames_regions} frames in predicted regions, "
+            f"{sum(self.full_frame_reasons.values())} full "
+            f"({', '.join(f'{k} {v}' for k, v in sorted(self.full_frame_reasons.items()))})",
         ]

@@ -1,10 +1,11 @@
 """The detection worker of :func:`tagloc.localize.realtime.run_wall` (the driver's wall
 clock): a drop-oldest queue of camera frames and the thread that detects them.
 
-The worker runs the detector on each frame it takes from the queue and puts the frame's tags,
-or None when the detector raised, on an output queue for the main thread; it never touches the
-node. Its thread can lower its own priority so that, on a busy core, the main thread's odometry
-preempts detection.
+The worker runs the detector on each frame it takes from the queue (in the regions predicted
+for the frame when the node was handed it, :meth:`LocalizerNode.region_detect`, or the full
+frame) and puts the frame's tags, or None when the detector raised, on an output queue for the
+main thread; it never touches the node's live state. Its thread can lower its own priority so
+that, on a busy core, the main thread's odometry preempts detection.
 """
 
 from __future__ import annotations
@@ -18,6 +19,9 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Generic, TypeVar
+
+import numpy as np
+import numpy.typing as npt
 
 from tagloc.localize.fiducial import FrameFixes
 from tagloc.messages import ImageMsg
@@ -92,18 +96,23 @@ class DropOldestQueue(Generic[T]):
 
 #: ``fixer(stamp_ns, detections)``: the frame's fixes, computed on the worker (PnP, gates).
 Fixer = Callable[[int, tuple[TagDetection, ...]], FrameFixes]
+#: ``detect(image, detector)``: the frame's tags in its predicted regions (or the full frame on
+#: the region detector's fallbacks).
+FrameDetect = Callable[[npt.NDArray[np.generic], TagDetector], list[TagDetection]]
 
 
 @dataclass(frozen=True, slots=True)
 class DetectionJob:
     """A frame of ``camera`` (a name of the node's rig; ``""``: its one camera) for the worker,
-    the wall time (``time.perf_counter``, s) it was due, and the node's fix computation when it
-    is ready (None: the main thread computes the fixes)."""
+    the wall time (``time.perf_counter``, s) it was due, the node's fix computation when it
+    is ready (None: the main thread computes the fixes) and its detection in the predicted
+    regions (None: the full frame)."""
 
     msg: ImageMsg
     due_s: float  # wall time the frame was due, s (perf_counter)
     fixer: Fixer | None = None
     camera: str = ""
+    detect: FrameDetect | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -148,7 +157,9 @@ def detect_loop(
     errors = 0
     while (job := inbox.get()) is not None:
         try:
-            detections: tuple[TagDetection, ...] | None = tuple(detector.detect(job.msg.image))
+            image = job.msg.image
+            found = detector.detect(image) if job.detect is None else job.detect(image, detector)
+            detections: tuple[TagDetection, ...] | None = tuple(found)
         except Exception:  # one frame's failure must not stop detection
             errors += 1
             if errors == 1:
