@@ -180,6 +180,8 @@ def main() -> None:
         ("odometry due -> transform p50 / p99 (ms)", "odom_due_to_estimate", ""),
         ("image due -> correction p50 / p99 (ms)", "image_to_correction",
          f"bare detector {det_p50:.1f} / {det_p99:.1f} ms per frame"),
+        ("worker: detection p50 / p99 (ms)", "worker_detect", "lock released in the C library"),
+        ("worker: fix computation p50 / p99 (ms)", "worker_fixes", "holds the lock"),
     ]  # fmt: skip
     for label, field, reference in rows:
         summaries = [getattr(stats, field) for stats, _ in runs]

@@ -73,6 +73,8 @@ class _TimingSink:
         self.odom_frame = LatencyReservoir(seed=3)
         self.odom_only = LatencyReservoir(seed=4)
         self.correction = LatencyReservoir(seed=5)
+        self.worker_detect = LatencyReservoir(seed=6)
+        self.worker_fixes = LatencyReservoir(seed=7)
         self._expect: tuple[int, float, float] | None = None  # stamp, fed, due (s)
         self._waiting: list[tuple[int, int, float]] = []  # heap: (stamp, seq, due)
         self._seq = 0
@@ -126,6 +128,9 @@ class _Runner:
 
     def deliver(self, result: DetectionResult) -> None:
         """A detected frame to the node (or an error counted)."""
+        self.timing.worker_detect.add(result.detect_s)
+        if result.fixes is not None:
+            self.timing.worker_fixes.add(result.fixes_s)
         if result.detections is None:
             self.errors += 1
             return
@@ -270,7 +275,8 @@ def run_wall(
         odom_only_to_estimate=timing.odom_only.summary(),
         image_to_correction=timing.correction.summary(), wall_s=time.perf_counter() - start,
         stream_s=0.0 if t0 is None else (stamp_last - t0) / S_NS, speed=rate,
-        frames_regions=regions.get("frames_regions", 0),
+        worker_detect=timing.worker_detect.summary(),
+        worker_fixes=timing.worker_fixes.summary(), frames_regions=regions.get("frames_regions", 0),
         full_frame_reasons=dict(regions.get("full_frame_reasons", {})),
     )  # fmt: skip
     return node, stats

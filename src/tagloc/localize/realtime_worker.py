@@ -15,6 +15,7 @@ import os
 import queue
 import sys
 import threading
+import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -117,12 +118,16 @@ class DetectionJob:
 
 @dataclass(frozen=True, slots=True)
 class DetectionResult:
-    """A detected frame: its tags (None when the detector raised on it) and its fixes when the
-    worker computed them."""
+    """A detected frame: its tags (None when the detector raised on it), its fixes when the
+    worker computed them, and the worker's wall time on each (s): the detection (with the
+    regions' prediction) and the fix computation (PnP, covariance, gates: Python and small
+    numpy calls, which hold the interpreter lock; 0 when not run)."""
 
     job: DetectionJob
     detections: tuple[TagDetection, ...] | None  # None: the detector raised
     fixes: FrameFixes | None = None
+    detect_s: float = 0.0
+    fixes_s: float = 0.0
 
 
 def lower_thread_priority(nice: int) -> None:
@@ -156,6 +161,7 @@ def detect_loop(
     lower_thread_priority(nice)
     errors = 0
     while (job := inbox.get()) is not None:
+        start = time.perf_counter()
         try:
             image = job.msg.image
             found = detector.detect(image) if job.detect is None else job.detect(image, detector)
@@ -169,6 +175,7 @@ def detect_loop(
                 logger.debug("detector raised on the frame at %d ns", job.msg.stamp_ns,
                              exc_info=True)  # fmt: skip
             detections = None
+        detected = time.perf_counter()
         fixes = None
         if detections is not None and job.fixer is not None:
             try:  # PnP and the gates here too: the main thread only applies the fixes
@@ -176,4 +183,5 @@ def detect_loop(
             except Exception:
                 logger.warning("fix computation raised on the frame at %d ns; the main thread "
                                "retries it", job.msg.stamp_ns, exc_info=True)  # fmt: skip
-        outbox.put(DetectionResult(job, detections, fixes))
+        done = time.perf_counter()
+        outbox.put(DetectionResult(job, detections, fixes, detected - start, done - detected))
