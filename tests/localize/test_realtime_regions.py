@@ -18,6 +18,7 @@ from tagloc.eval.scenarios import calibrated_config, scenario_config
 from tagloc.localize.driver import record_run, run
 from tagloc.localize.node import LocalizerNode
 from tagloc.localize.outputs import RunRecorder
+from tagloc.localize.roi_detector import ALARMS
 from tagloc.localize.run import FixAttempt, LocalizationRun
 from tagloc.messages import (
     CameraInfoMsg,
@@ -129,3 +130,40 @@ def test_the_worker_detects_in_regions_and_accepts_the_replay_clocks_fixes(
     assert want > 50 and abs(got - want) <= ACCEPTED_TOL * want, (got, want)
     realtime = recorder.run(result.node.metadata())
     assert _truth_ate(realtime, scenario) <= 1.2 * _truth_ate(offline, scenario) + 0.01
+
+
+def test_the_regions_come_from_the_node_state_at_hand_off(
+    drive: tuple[Scenario, list[tuple[str, Message]]],
+) -> None:
+    """A frame's region detection taken before the false detection's fix is decided searches
+    the regions; the same frame's taken after it (the filter alarmed) the full frame."""
+    scenario, stream = drive
+    config = calibrated_config(scenario, scenario_config())
+    node = LocalizerNode(scenario.tag_map, config)
+    first_image = next(i for i, (_, m) in enumerate(stream) if isinstance(m, ImageMsg))
+    false = next(i for i in range(first_image, len(stream)) if stream[i][0] == "/tag_detections")
+    after = next(i for i in range(false, len(stream)) if isinstance(stream[i][1], ImageMsg))
+    image = stream[after][1]
+    assert isinstance(image, ImageMsg)
+    for topic, msg in stream[:false]:
+        node.feed(topic, msg)
+
+    def counts() -> tuple[int, int]:
+        meta = node.metadata()
+        alarms = sum(meta["event_counts"].get(str(k), 0) for k in ALARMS)
+        regions = meta["regions"]
+        return alarms, regions["full_frame_reasons"].get("inconsistent_fix", 0)
+
+    before = node.region_detect(image.stamp_ns)
+    alarms0, full0 = counts()
+    for topic, msg in stream[false:after]:  # the false detection, decided by the odometry
+        node.feed(topic, msg)
+    late = node.region_detect(image.stamp_ns)
+    assert before is not None and late is not None
+    alarms1, _ = counts()
+    assert alarms1 > alarms0  # the filter gated (or held) the false fix
+    detector = make_detector("apriltag", "tag36h11")
+    before(image.image, detector)  # the state at hand-off: no alarm yet
+    assert counts()[1] == full0
+    late(image.image, detector)  # the state after the alarm
+    assert counts()[1] == full0 + 1
