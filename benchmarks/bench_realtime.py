@@ -7,24 +7,28 @@ all rendered before the run and held in memory; ground truth passes through.
 
 The driver's wall clock (:func:`tagloc.localize.driver.run`, ``clock="wall"``) feeds it to a
 :class:`LocalizerNode` at speed 1.0, with AprilTag detection (default backend, ``nthreads=1``) on a
-worker thread behind a drop-oldest queue of ``--queue`` frames, once with the worker at a
-lower priority (``worker_nice=10``, the default) and once at the main thread's. Reported
-(definitions in :class:`tagloc.localize.realtime_stats.RealtimeStats`):
+worker thread behind a drop-oldest queue of ``--queue`` frames, the worker at a lower priority
+(``worker_nice=10``, the default), each odometry sample published before the frames it
+completes (``publish_first``, as ``--realtime`` runs): the worker on the full frame
+(``tags.roi.enabled: false``), then in the predicted regions (the default), ``--repeats``
+times over, alternating, so both see the same load. Reported (definitions in
+:class:`tagloc.localize.realtime_stats.RealtimeStats`):
 
 - ``odometry -> transform``: from feeding an odometry sample to its ``Estimate`` (the published
-  ``map -> odom``) at a sink; the target is p99 <= 5 ms. Below it the samples whose feed also
+  ``map -> odom``) at a sink; the target is p99 <= 2 ms. Below it the samples whose feed also
   decided a camera frame (PnP, gates, filter update happen there, before the estimate).
   ``odometry due -> transform`` counts from when the sample was due, so it adds the main
   thread's own backlog (and the core taken by detection);
 - ``image -> correction``: from when a frame was due to the first estimate after its fixes;
-- frames dropped (%) and detector errors.
+- frames dropped (%), frames detected in regions / in full, and detector errors.
 
 Reference, in the same run on the same images: the bare detector's time per frame
-(``detector.detect(image)`` of every frame once, nothing else running), and the fused ATE of
-the replay clock's run (every frame detected inline, nothing dropped) beside the real-time one.
+(``detector.detect(image)`` of every frame once, nothing else running), and the fixes accepted
+and fused ATE of the replay clock's run (every frame detected inline, in regions by default,
+nothing dropped) beside the real-time ones.
 One core: the process is pinned to one CPU, ``cv2.setNumThreads(1)``.
 
-Run: ``.venv/bin/python benchmarks/bench_realtime.py [--seconds 20] [--queue 2]``
+Run: ``.venv/bin/python benchmarks/bench_realtime.py [--seconds 20] [--queue 2] [--repeats 2]``
 """
 
 from __future__ import annotations
@@ -34,6 +38,7 @@ import os
 import time
 from collections.abc import Iterator
 from functools import partial
+from typing import cast
 
 import cv2
 import numpy as np
@@ -117,7 +122,9 @@ def main() -> None:
     parser.add_argument("--odom-hz", type=float, default=200.0, help="odometry rate, Hz")
     parser.add_argument("--queue", type=int, default=2, help="frames waiting at most")
     parser.add_argument("--speed", type=float, default=1.0, help="stream s per wall s")
+    parser.add_argument("--repeats", type=int, default=2, help="pairs of real-time runs")
     args = parser.parse_args()
+    load_before = ", ".join(f"{x:.2f}" for x in os.getloadavg())
     pinned = pin_one_core()
     cv2.setNumThreads(1)
     start = time.perf_counter()
@@ -127,60 +134,73 @@ def main() -> None:
     # reference: the bare detector, then the replay clock (every frame detected inline)
     det_p50, det_p99 = detector_ms(images)
     offline = record_run(partial(LocalizerNode, scenario.tag_map, config), stream(scenario, images))
-    # the real-time runs, the worker at a lower priority: the live order (each odometry sample
-    # published before the frames it completes, as --realtime runs), then the replay order
+    counts = cast("dict[str, int]", offline.metadata.get("regions") or {})
+    offline_regions = f"{counts.get('frames_regions', 0)} / {counts.get('frames_full', 0)}"
+    # the real-time runs, the worker at a lower priority, in the live order (each odometry
+    # sample published before the frames it completes, as --realtime runs): the worker on the
+    # full frame, then in the predicted regions, twice over (the same load for both)
+    output = config.output.model_copy(update={"publish_first": True})
     runs = []
-    for first in (True, False):
-        nice = 10
-        output = config.output.model_copy(update={"publish_first": first})
-        live = config.model_copy(update={"output": output})
-        recorder = RunRecorder()
-        detector = make_detector(config.tags.backend, config.tags.family)
-        result = run(
-            partial(LocalizerNode, scenario.tag_map, live), stream(scenario, images), [recorder],
-            clock="wall", speed=args.speed, queue_size=args.queue, detector=detector,
-            worker_nice=nice,
-        )  # fmt: skip
-        assert result.realtime is not None
-        runs.append((result.realtime, recorder.run(result.node.metadata())))
+    for _ in range(args.repeats):
+        for regions in (False, True):
+            roi = config.tags.roi.model_copy(update={"enabled": regions})
+            tags = config.tags.model_copy(update={"roi": roi})
+            live = config.model_copy(update={"output": output, "tags": tags})
+            recorder = RunRecorder()
+            detector = make_detector(config.tags.backend, config.tags.family)
+            result = run(
+                partial(LocalizerNode, scenario.tag_map, live), stream(scenario, images),
+                [recorder], clock="wall", speed=args.speed, queue_size=args.queue,
+                detector=detector, worker_nice=10,
+            )  # fmt: skip
+            assert result.realtime is not None
+            runs.append((result.realtime, recorder.run(result.node.metadata())))
     load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
     n_odom = len(scenario.drive.stamps_ns)
     print(f"default drive, first {args.seconds:g} s: {len(images)} images 1280x720 at 30 Hz "
           f"(rendered in {render_s:.0f} s), {n_odom} odometry samples at {args.odom_hz:g} Hz; "
           f"AprilTag tag36h11 nthreads=1, cv2.setNumThreads(1), {pinned}; "
-          f"load average {load}")  # fmt: skip
-    print(f"run(clock='wall', speed={args.speed:g}, queue_size={args.queue}, worker_nice=10), "
-          "publish_first True | False: "
-          f"{runs[0][0].wall_s:.1f} | {runs[1][0].wall_s:.1f} s wall for "
+          f"load average before {load_before}, after {load}")  # fmt: skip
+    walls = " | ".join(f"{s.wall_s:.1f}" for s, _ in runs)
+    print(f"run(clock='wall', speed={args.speed:g}, queue_size={args.queue}, worker_nice=10, "
+          f"publish_first=True), full frame | regions (x{args.repeats}): {walls} s wall for "
           f"{runs[0][0].stream_s:.1f} s of stream")  # fmt: skip
-    header = f"{'measure':42s} {'live order':>16s} {'replay order':>16s}   reference"
+    labels = [("full", "regions")[i % 2] + f" #{i // 2 + 1}" for i in range(len(runs))]
+    header = f"{'measure':42s} " + " ".join(f"{x:>16s}" for x in labels) + "   reference"
     print(header)
     print("-" * (len(header) + 30))
+
+    def row(label: str, cells: list[str], reference: str = "") -> None:
+        print(f"{label:42s} " + " ".join(f"{c:>16s}" for c in cells) + f"   {reference}")
+
     rows = [
-        ("odometry -> transform p50 / p99 (ms)", "odom_to_estimate", "target p99 <= 5"),
+        ("odometry -> transform p50 / p99 (ms)", "odom_to_estimate", "target p99 <= 2"),
         ("  of those, with a frame decided", "odom_frame_to_estimate", ""),
         ("  of those, without", "odom_only_to_estimate", ""),
         ("odometry due -> transform p50 / p99 (ms)", "odom_due_to_estimate", ""),
         ("image due -> correction p50 / p99 (ms)", "image_to_correction",
          f"bare detector {det_p50:.1f} / {det_p99:.1f} ms per frame"),
+        ("worker: detection p50 / p99 (ms)", "worker_detect", "lock released in the C library"),
+        ("worker: fix computation p50 / p99 (ms)", "worker_fixes", "holds the lock"),
     ]  # fmt: skip
     for label, field, reference in rows:
-        cells = []
-        for stats, _ in runs:
-            summary = getattr(stats, field)
-            cells.append(f"{summary.p50_ms:.2f} / {summary.p99_ms:.2f}")
-        print(f"{label:42s} {cells[0]:>16s} {cells[1]:>16s}   {reference}")
-    cells = [f"{100 * s.drop_fraction:.1f} % ({s.frames_dropped}/{s.frames_in})" for s, _ in runs]
-    print(f"{'frames dropped':42s} {cells[0]:>16s} {cells[1]:>16s}   offline: 0 %")
-    errors = [s.detector_errors for s, _ in runs]
-    print(f"{'detector errors':42s} {errors[0]:>16d} {errors[1]:>16d}   offline: 0")
-    accepted = [sum(a.accepted for a in run.fixes) for _, run in runs]
+        summaries = [getattr(stats, field) for stats, _ in runs]
+        row(label, [f"{x.p50_ms:.2f} / {x.p99_ms:.2f}" for x in summaries], reference)
+    row("frames dropped",
+        [f"{100 * s.drop_fraction:.1f} % ({s.frames_dropped}/{s.frames_in})" for s, _ in runs],
+        "offline: 0 %")  # fmt: skip
+    row("frames in regions / full", [f"{s.frames_regions} / "
+        f"{sum(s.full_frame_reasons.values())}" for s, _ in runs],
+        f"offline: {offline_regions}")  # fmt: skip
+    row("detector errors", [str(s.detector_errors) for s, _ in runs], "offline: 0")
     offline_accepted = sum(a.accepted for a in offline.fixes)
-    print(f"{'fixes accepted':42s} {accepted[0]:>16d} {accepted[1]:>16d}   "
-          f"offline: {offline_accepted}")  # fmt: skip
-    ates = [ate_m(run) for _, run in runs]
-    print(f"{'fused ATE (m)':42s} {ates[0]:>16.3f} {ates[1]:>16.3f}   "
-          f"offline: {ate_m(offline):.3f}")  # fmt: skip
+    row("fixes accepted", [str(sum(a.accepted for a in r.fixes)) for _, r in runs],
+        f"offline (regions): {offline_accepted}")  # fmt: skip
+    row("fused ATE (m)", [f"{ate_m(r):.3f}" for _, r in runs],
+        f"offline: {ate_m(offline):.3f}")  # fmt: skip
+    for i, (stats, _) in enumerate(runs):
+        if stats.full_frame_reasons:
+            print(f"full frames of {labels[i]}: {dict(sorted(stats.full_frame_reasons.items()))}")
 
 
 if __name__ == "__main__":

@@ -18,8 +18,8 @@ class RegionConfig(StrictModel):
 
     #: Detect in predicted regions (the full frame on the fallback rules below; chosen by
     #: ``benchmarks/bench_pipeline.py``, see ``docs/detection.md``); the AprilTag backend only
-    #: (another backend always sees the full frame), and the replay clock only (the wall clock's
-    #: detection worker sees the full frame).
+    #: (another backend always sees the full frame); on the replay clock and on the wall
+    #: clock's detection worker alike.
     enabled: bool = True
     #: Every this many camera frames, the full frame (1: always the full frame).
     full_frame_every: int = Field(10, ge=1, le=100_000)

@@ -58,7 +58,7 @@ from tagloc.localize.fusion import Fusion
 from tagloc.localize.motion import CALIBRATION_PARAMETERS
 from tagloc.localize.outputs import NodeOutput, OutputSink
 from tagloc.localize.registry import build_fix_sources
-from tagloc.localize.source_tags import TagSource
+from tagloc.localize.source_tags import FrameDetect, TagSource
 from tagloc.localize.sources import Arrival, FixContext, FixSource, SkipCounter, SourceInputs
 from tagloc.localize.tag_cameras import NodeCamera
 from tagloc.localize.work_queue import WorkQueue
@@ -263,6 +263,17 @@ class LocalizerNode:
             return None if T_map_odom is None or T_odom_base is None else T_map_odom @ T_odom_base
 
         return self._tags.fixer(stamp_ns, frame_id, self._context(), prior, T_odom_base, camera)
+
+    def region_detect(
+        self, stamp_ns: int, camera: str | None = None
+    ) -> FrameDetect | None:
+        """A function ``detect(image, detector)`` that detects the frame at ``stamp_ns`` of
+        ``camera`` (None: the first) in the regions predicted from the node's estimate now,
+        with the region detector's fallbacks, for a worker thread (None: no tag source, or
+        ``tags.roi.enabled`` false); :meth:`TagSource.region_detect`."""
+        if self._tags is None:
+            return None
+        return self._tags.region_detect(stamp_ns, self._context(), camera)
 
     def finish(self) -> None:
         """Process the work still waiting for odometry and hand on every held record.

@@ -12,7 +12,12 @@ feeds a :class:`~tagloc.localize.node.LocalizerNode` from any message source (an
    is one resource); when it is full the *oldest* waiting frame, of whichever camera, is
    dropped and counted (a stale frame is worth less than a fresh one). One worker thread, at a
    lower priority (``worker_nice``), runs the detector (the node's configured backend unless
-   given) and hands back the frame's tags (:mod:`tagloc.localize.realtime_worker`); the main
+   given) and hands back the frame's tags (:mod:`tagloc.localize.realtime_worker`). It detects
+   in the regions where the mapped tags are predicted (``tags.roi``,
+   :mod:`tagloc.localize.roi_detector`, with its fallbacks to the full frame: every
+   ``full_frame_every`` frames, after a gap, after an alarming decision, ...), predicted from
+   the node's estimate and state when the frame was handed to the worker (never a later
+   one: :meth:`LocalizerNode.region_detect`); the main
    thread feeds them to the node as a ``TagDetectionsMsg`` (same stamp and ``frame_id``) on
    that camera's detections topic. Once the node can form a camera's fixes (its model and
    extrinsics known), the worker also computes each of its frames' fixes (PnP, covariance,
@@ -68,6 +73,8 @@ class _TimingSink:
         self.odom_frame = LatencyReservoir(seed=3)
         self.odom_only = LatencyReservoir(seed=4)
         self.correction = LatencyReservoir(seed=5)
+        self.worker_detect = LatencyReservoir(seed=6)
+        self.worker_fixes = LatencyReservoir(seed=7)
         self._expect: tuple[int, float, float] | None = None  # stamp, fed, due (s)
         self._waiting: list[tuple[int, int, float]] = []  # heap: (stamp, seq, due)
         self._seq = 0
@@ -121,6 +128,9 @@ class _Runner:
 
     def deliver(self, result: DetectionResult) -> None:
         """A detected frame to the node (or an error counted)."""
+        self.timing.worker_detect.add(result.detect_s)
+        if result.fixes is not None:
+            self.timing.worker_fixes.add(result.fixes_s)
         if result.detections is None:
             self.errors += 1
             return
@@ -233,8 +243,10 @@ def run_wall(
             camera = run.image_camera.get(topic) if isinstance(msg, ImageMsg) else None
             if isinstance(msg, ImageMsg) and camera is not None:
                 run.frames_in += 1
+                # the node's state now, for the fixes' and the regions' computation later
                 fixer = node.fixer(msg.stamp_ns, msg.frame_id, camera)
-                if inbox.put(DetectionJob(msg, due_s, fixer, camera)) is not None:
+                detect = node.region_detect(msg.stamp_ns, camera)
+                if inbox.put(DetectionJob(msg, due_s, fixer, camera, detect)) is not None:
                     run.dropped += 1
                     if run.dropped == 1:
                         logger.info("detector behind: dropped the oldest waiting frame "
@@ -254,6 +266,7 @@ def run_wall(
     finally:
         inbox.close(discard=True)
         worker.join()
+    regions = node.metadata().get("regions") or {}
     stats = RealtimeStats(
         frames_in=run.frames_in, frames_dropped=run.dropped, detector_errors=run.errors,
         detections_in=run.detections_in, odom_to_estimate=timing.odom.summary(),
@@ -262,5 +275,8 @@ def run_wall(
         odom_only_to_estimate=timing.odom_only.summary(),
         image_to_correction=timing.correction.summary(), wall_s=time.perf_counter() - start,
         stream_s=0.0 if t0 is None else (stamp_last - t0) / S_NS, speed=rate,
+        worker_detect=timing.worker_detect.summary(),
+        worker_fixes=timing.worker_fixes.summary(), frames_regions=regions.get("frames_regions", 0),
+        full_frame_reasons=dict(regions.get("full_frame_reasons", {})),
     )  # fmt: skip
     return node, stats

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import random
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
@@ -127,6 +127,18 @@ class RealtimeStats:
         Stamp span of the source, s.
     speed : float
         Pacing factor (``inf``: as fast as possible).
+    worker_detect : LatencySummary
+        The worker's time per frame in detection (with the regions' prediction; the AprilTag
+        library releases the interpreter lock while it runs).
+    worker_fixes : LatencySummary
+        The worker's time per frame in the fix computation (PnP, covariance, gates: Python and
+        small numpy calls, which hold the interpreter lock against the main thread's odometry
+        in slices of ``sys.getswitchinterval()``); the frames whose fixes it formed.
+    frames_regions : int
+        Frames the worker detected in predicted regions only (``tags.roi``).
+    full_frame_reasons : dict of str to int
+        The frames it detected in full, by reason (:mod:`tagloc.localize.roi_detector`; empty
+        when ``tags.roi.enabled`` is false).
     """
 
     frames_in: int
@@ -141,6 +153,10 @@ class RealtimeStats:
     wall_s: float
     stream_s: float
     speed: float
+    worker_detect: LatencySummary = LatencySummary(0, math.nan, math.nan, math.nan)
+    worker_fixes: LatencySummary = LatencySummary(0, math.nan, math.nan, math.nan)
+    frames_regions: int = 0
+    full_frame_reasons: dict[str, int] = field(default_factory=dict)
 
     @property
     def drop_fraction(self) -> float:
@@ -166,4 +182,9 @@ class RealtimeStats:
             f"odometry with a frame -> estimate: {self.odom_frame_to_estimate.text()}",
             f"odometry without a frame -> estimate: {self.odom_only_to_estimate.text()}",
             f"image due -> correction: {self.image_to_correction.text()}",
+            f"worker, detection: {self.worker_detect.text()}",
+            f"worker, fix computation: {self.worker_fixes.text()}",
+            f"detection: {self.frames_regions} frames in predicted regions, "
+            f"{sum(self.full_frame_reasons.values())} full "
+            f"({', '.join(f'{k} {v}' for k, v in sorted(self.full_frame_reasons.items()))})",
         ]

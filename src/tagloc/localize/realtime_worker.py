@@ -1,10 +1,11 @@
 """The detection worker of :func:`tagloc.localize.realtime.run_wall` (the driver's wall
 clock): a drop-oldest queue of camera frames and the thread that detects them.
 
-The worker runs the detector on each frame it takes from the queue and puts the frame's tags,
-or None when the detector raised, on an output queue for the main thread; it never touches the
-node. Its thread can lower its own priority so that, on a busy core, the main thread's odometry
-preempts detection.
+The worker runs the detector on each frame it takes from the queue (in the regions predicted
+for the frame when the node was handed it, :meth:`LocalizerNode.region_detect`, or the full
+frame) and puts the frame's tags, or None when the detector raised, on an output queue for the
+main thread; it never touches the node's live state. Its thread can lower its own priority so
+that, on a busy core, the main thread's odometry preempts detection.
 """
 
 from __future__ import annotations
@@ -14,10 +15,14 @@ import os
 import queue
 import sys
 import threading
+import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Generic, TypeVar
+
+import numpy as np
+import numpy.typing as npt
 
 from tagloc.localize.fiducial import FrameFixes
 from tagloc.messages import ImageMsg
@@ -92,28 +97,37 @@ class DropOldestQueue(Generic[T]):
 
 #: ``fixer(stamp_ns, detections)``: the frame's fixes, computed on the worker (PnP, gates).
 Fixer = Callable[[int, tuple[TagDetection, ...]], FrameFixes]
+#: ``detect(image, detector)``: the frame's tags in its predicted regions (or the full frame on
+#: the region detector's fallbacks).
+FrameDetect = Callable[[npt.NDArray[np.generic], TagDetector], list[TagDetection]]
 
 
 @dataclass(frozen=True, slots=True)
 class DetectionJob:
     """A frame of ``camera`` (a name of the node's rig; ``""``: its one camera) for the worker,
-    the wall time (``time.perf_counter``, s) it was due, and the node's fix computation when it
-    is ready (None: the main thread computes the fixes)."""
+    the wall time (``time.perf_counter``, s) it was due, the node's fix computation when it
+    is ready (None: the main thread computes the fixes) and its detection in the predicted
+    regions (None: the full frame)."""
 
     msg: ImageMsg
     due_s: float  # wall time the frame was due, s (perf_counter)
     fixer: Fixer | None = None
     camera: str = ""
+    detect: FrameDetect | None = None
 
 
 @dataclass(frozen=True, slots=True)
 class DetectionResult:
-    """A detected frame: its tags (None when the detector raised on it) and its fixes when the
-    worker computed them."""
+    """A detected frame: its tags (None when the detector raised on it), its fixes when the
+    worker computed them, and the worker's wall time on each (s): the detection (with the
+    regions' prediction) and the fix computation (PnP, covariance, gates: Python and small
+    numpy calls, which hold the interpreter lock; 0 when not run)."""
 
     job: DetectionJob
     detections: tuple[TagDetection, ...] | None  # None: the detector raised
     fixes: FrameFixes | None = None
+    detect_s: float = 0.0
+    fixes_s: float = 0.0
 
 
 def lower_thread_priority(nice: int) -> None:
@@ -147,8 +161,11 @@ def detect_loop(
     lower_thread_priority(nice)
     errors = 0
     while (job := inbox.get()) is not None:
+        start = time.perf_counter()
         try:
-            detections: tuple[TagDetection, ...] | None = tuple(detector.detect(job.msg.image))
+            image = job.msg.image
+            found = detector.detect(image) if job.detect is None else job.detect(image, detector)
+            detections: tuple[TagDetection, ...] | None = tuple(found)
         except Exception:  # one frame's failure must not stop detection
             errors += 1
             if errors == 1:
@@ -158,6 +175,7 @@ def detect_loop(
                 logger.debug("detector raised on the frame at %d ns", job.msg.stamp_ns,
                              exc_info=True)  # fmt: skip
             detections = None
+        detected = time.perf_counter()
         fixes = None
         if detections is not None and job.fixer is not None:
             try:  # PnP and the gates here too: the main thread only applies the fixes
@@ -165,4 +183,5 @@ def detect_loop(
             except Exception:
                 logger.warning("fix computation raised on the frame at %d ns; the main thread "
                                "retries it", job.msg.stamp_ns, exc_info=True)  # fmt: skip
-        outbox.put(DetectionResult(job, detections, fixes))
+        done = time.perf_counter()
+        outbox.put(DetectionResult(job, detections, fixes, detected - start, done - detected))

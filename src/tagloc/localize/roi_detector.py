@@ -26,7 +26,10 @@ not (a tag entering view between the two frames counts too: an upper bound on th
 
 The node's state arrives through :meth:`RegionDetector.observe` (each fix computation's
 :class:`~tagloc.localize.sources.FixContext`: the node's live transform buffer and filter);
-the prediction for a frame uses them as they are when the frame arrives.
+the prediction for a frame uses them as they are when the frame arrives. A detector on another
+thread (the wall clock's worker) takes the node's state as a :class:`NodeView` made on the
+node's thread when the frame is handed over (:meth:`RegionDetector.view`) and passes it to
+:meth:`RegionDetector.detect`, so it never reads the live buffer or filter.
 """
 
 from __future__ import annotations
@@ -53,7 +56,7 @@ from tagloc.tags import AprilTagDetector, TagDetection, TagDetector, TagMap
 from tagloc.tags.regions import PixelRegion, detect_in_regions
 from tagloc.units import S_NS
 
-__all__ = ["RegionDetector", "RegionStats"]
+__all__ = ["NodeView", "RegionDetector", "RegionStats"]
 
 logger = logging.getLogger(__name__)
 
@@ -96,6 +99,20 @@ class RegionStats:
         }  # fmt: skip
 
 
+@dataclass(frozen=True, slots=True, eq=False)
+class NodeView:
+    """What a frame's region decision reads of the node, taken at one instant (the frame's
+    arrival): filter initialized and not re-acquiring (``estimate``), the ladder level (None
+    unknown), the filter's alarm count (:data:`ALARMS`), and the estimate of the base in the
+    map at the frame's stamp with its ``(6, 6)`` covariance (None: none; grown by the motion
+    possible since the newest odometry when that ends before the frame)."""
+
+    estimate: bool
+    level: int | None
+    alarms: int
+    pose: tuple[SE3, np.ndarray] | None
+
+
 class RegionDetector:
     """Predicted-region detection for one camera (module docstring).
 
@@ -125,6 +142,19 @@ class RegionDetector:
         """The node's state as of the latest fix computation (for the next frames)."""
         self._context = context
 
+    def view(self, stamp_ns: int, context: FixContext | None = None) -> NodeView | None:
+        """The node's state for the frame at ``stamp_ns``, as it is now (``context``, or the
+        one observed last; None: none yet). Reads the node only, never this detector's frame
+        history: call it on the node's thread, :meth:`detect` may run on another."""
+        context = self._context if context is None else context
+        if context is None:
+            return None
+        flt = context.filter
+        estimate = flt.initialized and not flt.reacquiring
+        alarms = sum(flt.events.count(kind) for kind in ALARMS)
+        pose = self._pose(stamp_ns, context) if estimate else None
+        return NodeView(estimate, context.level, alarms, pose)
+
     def reset(self) -> None:
         """Forget the node's state and the frame history (a clock jump back)."""
         self._context = None
@@ -138,17 +168,20 @@ class RegionDetector:
 
     def detect(
         self, stamp_ns: int, image: npt.NDArray[np.generic], detector: TagDetector,
-        camera: CameraModel | None, T_base_cam: SE3 | None,
+        camera: CameraModel | None, T_base_cam: SE3 | None, view: NodeView | None = None,
     ) -> list[TagDetection]:  # fmt: skip
-        """One frame's detections, in the regions or the full frame (module docstring)."""
+        """One frame's detections, in the regions or the full frame (module docstring), from
+        ``view`` of the node (default: :meth:`view` now)."""
         regions: list[PixelRegion] = []
-        reason = self._full_reason(stamp_ns, detector)
+        if view is None and isinstance(detector, AprilTagDetector):
+            view = self.view(stamp_ns)
+        reason = self._full_reason(stamp_ns, detector, view)
         if reason is None and (camera is None or T_base_cam is None):
             reason = "no_estimate"
         if reason is None:
-            assert camera is not None and T_base_cam is not None
+            assert camera is not None and T_base_cam is not None and view is not None
             assert isinstance(detector, AprilTagDetector)
-            regions, reason = self._plan(stamp_ns, camera, T_base_cam, detector.quad_decimate)
+            regions, reason = self._plan(view, camera, T_base_cam, detector.quad_decimate)
         self._last_stamp = stamp_ns
         self.last_reason = reason
         if reason is not None:
@@ -170,15 +203,16 @@ class RegionDetector:
         return detections
 
     # ----- internals -------------------------------------------------------------------------
-    def _full_reason(self, stamp_ns: int, detector: TagDetector) -> str | None:
-        context = self._context
+    def _full_reason(
+        self, stamp_ns: int, detector: TagDetector, view: NodeView | None
+    ) -> str | None:
         if not isinstance(detector, AprilTagDetector):
             return "backend"
-        if context is None or not context.filter.initialized or context.filter.reacquiring:
+        if view is None or not view.estimate:
             return "no_estimate"
-        if context.level is not None and context.level >= Level.ODOMETRY_ONLY:
+        if view.level is not None and view.level >= Level.ODOMETRY_ONLY:
             return "odometry_only"
-        alarms = sum(context.filter.events.count(kind) for kind in ALARMS)
+        alarms = view.alarms
         if alarms != self._alarms_seen:
             if self._alarms_seen >= 0:
                 self._alarm_frames = self._config.full_frames_after_alarm
@@ -195,9 +229,9 @@ class RegionDetector:
         return None
 
     def _plan(
-        self, stamp_ns: int, camera: CameraModel, T_base_cam: SE3, min_decimate: float
+        self, view: NodeView, camera: CameraModel, T_base_cam: SE3, min_decimate: float
     ) -> tuple[list[PixelRegion], str | None]:
-        pose = self._pose(stamp_ns)
+        pose = view.pose
         if pose is None:
             return [], "no_estimate"
         T_map_base, cov = pose
@@ -213,11 +247,9 @@ class RegionDetector:
             return [], "regions_cover_frame"
         return regions, None
 
-    def _pose(self, stamp_ns: int) -> tuple[SE3, np.ndarray] | None:
+    def _pose(self, stamp_ns: int, context: FixContext) -> tuple[SE3, np.ndarray] | None:
         """The estimate at ``stamp_ns`` (or at the newest odometry before it, its uncertainty
         grown by the motion possible since) with its covariance; None if there is none."""
-        context = self._context
-        assert context is not None
         cfg = self._config
         try:
             latest = context.buffer.latest_stamp(self._odom_frame, self._base_frame)

@@ -4,7 +4,9 @@ Frames come from every camera of the rig (:mod:`tagloc.localize.tag_cameras`: th
 given, each on its own topics, or one camera on ``topics``). A frame is pre-detected corners
 (``TagDetectionsMsg``), an image run through the configured detector (``ImageMsg``), or fixes
 formed on a worker thread (:meth:`TagSource.fixer`, :meth:`TagSource.arrive_fixed`, for the
-camera named). It waits in the node's queue until the odometry covers its stamp; then its camera's
+camera named; the worker detects in the predicted regions through
+:meth:`TagSource.region_detect`). It waits in the node's queue until the odometry covers its
+stamp; then its camera's
 :class:`~tagloc.localize.fiducial.FiducialFixSource` (built on first use, once the camera
 model, from ``CameraInfoMsg`` unless given, and the extrinsics, from the stream's static
 ``base -> <frame_id>`` unless given, are known) forms its fixes with the filter's estimate as
@@ -23,6 +25,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from tagloc._types import FloatArray
 from tagloc.camera import CameraModel, from_camera_info
@@ -45,7 +48,7 @@ from tagloc.localize.sources import (
 from tagloc.localize.tag_cameras import CameraSlot, NodeCamera, camera_slots
 from tagloc.messages import CameraInfoMsg, ImageMsg, Message, TagDetectionsMsg
 from tagloc.supervise import FixSourceSpec
-from tagloc.tags import TagDetection
+from tagloc.tags import TagDetection, TagDetector
 
 logger = logging.getLogger(__name__)
 
@@ -59,6 +62,9 @@ _NAN6.flags.writeable = False
 
 #: ``fixer(stamp_ns, detections)``: a frame's fixes, formed off the node's thread.
 Fixer = Callable[[int, tuple[TagDetection, ...]], FrameFixes]
+#: ``detect(image, detector)``: a frame's detections in its predicted regions, off the node's
+#: thread.
+FrameDetect = Callable[[npt.NDArray[np.generic], TagDetector], list[TagDetection]]
 
 
 @dataclass(frozen=True, slots=True)
@@ -252,6 +258,28 @@ class TagSource:
             return source.frame_fixes(stamp, detections, prior(), None, up_base)
 
         return fixes
+
+    def region_detect(
+        self, stamp_ns: int, context: FixContext, camera: str | None = None
+    ) -> FrameDetect | None:
+        """A function that detects the frame at ``stamp_ns`` of ``camera`` (None: the first)
+        in the regions predicted from the node's state now (``context``: the prediction never
+        sees a later state), with the camera's fallbacks to the full frame and its counts, for
+        a worker thread (None: ``tags.roi.enabled`` is false). Call the functions in frame
+        order, from one thread."""
+        slot = self._slot(camera)
+        regions = self._regions.get(slot.name)
+        if regions is None:
+            return None
+        cam, T_base_cam = slot.camera, self.extrinsics(slot)
+        view = regions.view(stamp_ns, context)
+
+        def detect(image: npt.NDArray[np.generic], detector: TagDetector) -> list[TagDetection]:
+            if cam is not None and image.shape[:2] != (cam.height, cam.width):
+                return list(detector.detect(image))  # not this camera's size: no prediction
+            return regions.detect(stamp_ns, image, detector, cam, T_base_cam, view)
+
+        return detect
 
     # ----- internals -------------------------------------------------------------------------
     def _frame(self, frame: _Frame) -> Arrival:
