@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -14,13 +15,16 @@ _SRC = str(Path(tagloc.__file__).resolve().parents[1])
 
 
 def run_tagloc(*args: str, timeout_s: float = 300.0) -> subprocess.CompletedProcess[str]:
-    """``tagloc ARGS`` with a bare environment (no PATH, Agg plots, a wide terminal); a hang is
-    a failure after ``timeout_s``."""
+    """``tagloc ARGS`` with a bare environment (no PATH, Agg plots, a wide terminal; the
+    machine's ``OPENBLAS_*`` settings kept, since they choose OpenBLAS's kernels and so the last
+    digits of a result, which a test comparing with a run in this process must share); a hang
+    is a failure after ``timeout_s``."""
+    blas = {k: v for k, v in os.environ.items() if k.startswith("OPENBLAS_")}
     return subprocess.run(
         [sys.executable, "-c", _MAIN, *args],
         capture_output=True,
         text=True,
-        env={"MPLBACKEND": "Agg", "PATH": "", "COLUMNS": "200", "PYTHONPATH": _SRC},
+        env={"MPLBACKEND": "Agg", "PATH": "", "COLUMNS": "200", "PYTHONPATH": _SRC, **blas},
         check=False,
         timeout=timeout_s,
     )

@@ -294,7 +294,9 @@ def test_the_worker_detects_every_camera_of_a_rig() -> None:
     node = _node(source, cameras=cameras)
     offline = record_run(node, stream)
     recorder = RunRecorder()
-    stats = _wall(node, paced, [recorder], speed=4.0, queue_size=len(detections),
+    # at twice real time: at 4x on a loaded 2-core CI machine the main thread fell behind the
+    # odometry and the oldest frames waiting for it were dropped (697 of 850 fixes)
+    stats = _wall(node, paced, [recorder], speed=2.0, queue_size=len(detections),
                   detector=_EveryFrameDetector(detections), worker_nice=0)  # fmt: skip
     assert stats.frames_in == len(detections) and stats.frames_dropped == 0
     assert stats.detector_errors == 0
