@@ -37,6 +37,7 @@ from tagloc.camera import CameraModel
 from tagloc.errors import TransformLookupError
 from tagloc.frames import TransformBuffer
 from tagloc.geometry import SE3
+from tagloc.localize.cab_start import CabStart
 from tagloc.localize.config import LocalizerConfig
 from tagloc.localize.events import APPLIED, EventKind, FilterEvent
 from tagloc.localize.fiducial import E_Z, FiducialConfig, FiducialFixSource, SourcedFix
@@ -44,7 +45,7 @@ from tagloc.localize.filter import MapOdomFilter
 from tagloc.localize.fix import LocalizeError
 from tagloc.localize.floors import FloorFrame, floor_table, tag_ids_of
 from tagloc.localize.outputs import Estimate, NodeOutput
-from tagloc.localize.ride_anchor import LandingSettle, RideAnchor
+from tagloc.localize.ride_anchor import RideAnchor
 from tagloc.localize.run import CabEstimate
 from tagloc.supervise import CabState, CabTransition, EstimatorState, FloorChange, Supervisor
 from tagloc.tags import TagDetection, TagMap
@@ -96,7 +97,7 @@ class Elevators:
         self._cab_frame = ""
         self._cab_sources: dict[str, FiducialFixSource] = {}
         self._cab_fix: tuple[int, float] | None = None  # last accepted cab fix: stamp, odometer
-        self._settle: LandingSettle | None = None  # while the cab's estimate rests on its placement
+        self._start = CabStart(config.elevators)  # the cab's estimate's start (at boarding)
         self._odometer_m = 0.0
         self._pending: FloorChange | None = None  # declared at the next estimate
         self._cov: tuple[int, np.ndarray] | None = None
@@ -148,8 +149,8 @@ class Elevators:
             self._emit(self._cab_estimate(cab, stamp_ns, buffer))
         book = self._supervisor.floors
         boarding = handoff is not None and handoff.state is CabState.BOARDING
-        resting = self._settle is not None and not self._settle.done  # on the placement itself
-        if boarding and self._main is not None and (book is None or book.known) and not resting:
+        known = book is None or book.known
+        if boarding and self._main is not None and known and not self._start.resting:
             self.anchor.observe(stamp_ns, self._main(), cab, self.floors)  # the cab's pose
 
     def frame(
@@ -260,7 +261,8 @@ class Elevators:
             frames = cfg.frames.model_copy(update={"map_frame": cab_frame})
             self._cab = MapOdomFilter.from_config(cfg.model_copy(update={"frames": frames}), buffer)
             self._cab.events.listeners.append(self._cab_event)
-            self._cab_frame, self._cab_fix, self._settle = cab_frame, None, None
+            self._cab_frame, self._cab_fix = cab_frame, None
+            self._start = CabStart(cfg.elevators)
             logger.info("%d estimating the pose in %s", stamp_ns, cab_frame)
         cab = self._cab
         assert cab is not None
@@ -269,8 +271,12 @@ class Elevators:
             source = self._cab_sources[cab_frame] = _fiducial(
                 self._config, camera, T_base_cam, self._tag_map, cab_frame
             )
-        if new:
-            self._start(stamp_ns, cab, source)
+        book = self._supervisor.floors
+        if self._main is not None and (book is None or book.known):
+            started = self._start.start(stamp_ns, cab, self._main(), self.anchor, self.floors,
+                                        source, self._odometer_m)  # fmt: skip
+            if started:
+                self._cab_fix = None  # a start, not a fix (the ladder counts fixes)
         prior = None
         if cab.initialized:
             try:
@@ -279,45 +285,10 @@ class Elevators:
                 prior = None
         for sourced in source.frame_fixes(stamp_ns, detections, prior).fixes:
             self.cab_fixes["offered"] += 1
-            sourced = self._weigh(sourced)
+            sourced = self._start.weigh(sourced, self._odometer_m)
             event = cab.update(sourced.fix)
             if self.on_fix is not None:
                 self.on_fix(cab_frame, sourced, event, cab)
-
-    def _start(self, stamp_ns: int, cab: MapOdomFilter, source: FiducialFixSource) -> None:
-        """Start a new cab estimate from the map estimate and the cab's placement
-        (:meth:`RideAnchor.cab_start`), where a ride placed the cab and the floor is known; the
-        cab's tags then correct it through the filter's gates (never over a cab fix)."""
-        book = self._supervisor.floors
-        if self._main is None or not self._config.elevators.cab_start_prior:
-            return
-        if book is not None and not book.known:
-            return
-        start = self.anchor.cab_start(self._main(), self.floors)
-        if start is None:
-            return
-        try:
-            cab.initialize(stamp_ns, *start)
-        except (TransformLookupError, LocalizeError):  # no odometry there, a bad covariance
-            return
-        self._cab_fix = None  # a start, not a fix (the ladder counts fixes)
-        c = self._config.elevators
-        tags = {i: T.translation for i, T in source.T_map_tag.items()}
-        near = c.model_copy(update={"landing_near_m": c.cab_near_m})
-        self._settle = LandingSettle(near, self._odometer_m, tags)
-        logger.info("%d %s estimate started from the cab's placement", stamp_ns, self._cab_frame)
-
-    def _weigh(self, sourced: SourcedFix) -> SourcedFix:
-        """A cab fix as the cab's estimate takes it: while that estimate rests on the cab's
-        placement, fixes of tags farther than ``elevators.cab_near_m`` are weighed as far
-        landing fixes are (:class:`~.ride_anchor.LandingSettle`: a far single tag's turn and
-        range error, shared by the fixes of one view), so they confirm the start without
-        dragging it; the first nearer fix ends that."""
-        settle = self._settle
-        if settle is None or settle.done:
-            return sourced
-        fix = settle.weigh(sourced.fix, self._odometer_m)
-        return sourced if fix is sourced.fix else dataclasses.replace(sourced, fix=fix)
 
     def _cab_event(self, event: FilterEvent) -> None:
         """An event of the cab's filter: the last applied fix, for the ladder."""
