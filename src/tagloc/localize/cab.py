@@ -37,6 +37,7 @@ from tagloc.camera import CameraModel
 from tagloc.errors import TransformLookupError
 from tagloc.frames import TransformBuffer
 from tagloc.geometry import SE3
+from tagloc.localize.cab_start import CabStart
 from tagloc.localize.config import LocalizerConfig
 from tagloc.localize.events import APPLIED, EventKind, FilterEvent
 from tagloc.localize.fiducial import E_Z, FiducialConfig, FiducialFixSource, SourcedFix
@@ -96,6 +97,7 @@ class Elevators:
         self._cab_frame = ""
         self._cab_sources: dict[str, FiducialFixSource] = {}
         self._cab_fix: tuple[int, float] | None = None  # last accepted cab fix: stamp, odometer
+        self._start = CabStart(config.elevators)  # the cab's estimate's start (at boarding)
         self._odometer_m = 0.0
         self._pending: FloorChange | None = None  # declared at the next estimate
         self._cov: tuple[int, np.ndarray] | None = None
@@ -147,7 +149,8 @@ class Elevators:
             self._emit(self._cab_estimate(cab, stamp_ns, buffer))
         book = self._supervisor.floors
         boarding = handoff is not None and handoff.state is CabState.BOARDING
-        if boarding and self._main is not None and (book is None or book.known):
+        known = book is None or book.known
+        if boarding and self._main is not None and known and not self._start.resting:
             self.anchor.observe(stamp_ns, self._main(), cab, self.floors)  # the cab's pose
 
     def frame(
@@ -252,19 +255,28 @@ class Elevators:
         self, stamp_ns: int, detections: tuple[TagDetection, ...], cab_frame: str,
         buffer: TransformBuffer, camera: CameraModel, T_base_cam: SE3,
     ) -> None:  # fmt: skip
-        if self._cab is None or self._cab_frame != cab_frame:
+        new = self._cab is None or self._cab_frame != cab_frame
+        if new:
             cfg = self._config
             frames = cfg.frames.model_copy(update={"map_frame": cab_frame})
             self._cab = MapOdomFilter.from_config(cfg.model_copy(update={"frames": frames}), buffer)
             self._cab.events.listeners.append(self._cab_event)
             self._cab_frame, self._cab_fix = cab_frame, None
+            self._start = CabStart(cfg.elevators)
             logger.info("%d estimating the pose in %s", stamp_ns, cab_frame)
         cab = self._cab
+        assert cab is not None
         source = self._cab_sources.get(cab_frame)
         if source is None:
             source = self._cab_sources[cab_frame] = _fiducial(
                 self._config, camera, T_base_cam, self._tag_map, cab_frame
             )
+        book = self._supervisor.floors
+        if self._main is not None and (book is None or book.known):
+            started = self._start.start(stamp_ns, cab, self._main(), self.anchor, self.floors,
+                                        source, self._odometer_m)  # fmt: skip
+            if started:
+                self._cab_fix = None  # a start, not a fix (the ladder counts fixes)
         prior = None
         if cab.initialized:
             try:
@@ -273,6 +285,7 @@ class Elevators:
                 prior = None
         for sourced in source.frame_fixes(stamp_ns, detections, prior).fixes:
             self.cab_fixes["offered"] += 1
+            sourced = self._start.weigh(sourced, self._odometer_m)
             event = cab.update(sourced.fix)
             if self.on_fix is not None:
                 self.on_fix(cab_frame, sourced, event, cab)

@@ -201,6 +201,22 @@ class RideAnchor:
         if self._best is None or var_xy < self._best[0]:
             self._best = (var_xy, T_floor_cab, cov)
 
+    def cab_start(self, main: MapOdomFilter, floors: FloorFrame) -> tuple[SE3, FloatArray] | None:
+        """The cab's estimate before any cab fix: the map estimate carried into the cab by the
+        cab's placement, ``T_cab_odom = inv(T_floor_cab) @ T_floor_odom``, with the covariance
+        of both; None before a ride placed the cab, or while the map estimate is not there or
+        re-acquiring (the floor must be known: the caller's to check)."""
+        placed, P = self.placement.T_floor_cab, self.placement.cov
+        if not self._c.carry_through_ride or placed is None or P is None:
+            return None
+        if not main.initialized or main.reacquiring:
+            return None
+        T_floor_odom = floors.lift(main.T_map_odom, -floors.height_m)
+        T_cab_floor = placed.inverse()
+        cov = cov_compose(T_cab_floor, cov_inverse(placed, P), T_floor_odom,
+                          _regular(main.covariance))  # fmt: skip
+        return T_cab_floor @ T_floor_odom, _regular(cov)
+
     def alighted(
         self, stamp_ns: int, main: MapOdomFilter, cab: MapOdomFilter, floors: FloorFrame
     ) -> LandingSettle | None:

@@ -76,6 +76,13 @@ class ElevatorConfig(StrictModel):
     #: cab (the cab's tags) composed with the cab's pose measured when the doors closed (a shaft
     #: is vertical). False: the landing's tags alone re-acquire it.
     carry_through_ride: bool = True
+    #: Start the cab's estimate at the cab's first tag from the map estimate composed with the
+    #: cab's pose in the floor's frame (measured by the earlier rides' boardings), with the
+    #: covariance of both; its tags then correct it. False: the cab's tags alone start it.
+    cab_start_prior: bool = True
+    #: While the cab's estimate rests on that start, cab fixes from farther than this (m) are
+    #: weighed as far landing fixes are (``landing_tilt_sigma_rad``); a nearer one ends it.
+    cab_near_m: float = Field(1.2, gt=0, le=100)
     #: After an exit, landing tags' fixes from farther than this (m) are weighed for the error
     #: one view shares (``landing_tilt_sigma_rad``, ``landing_viewpoint_m``); a fix from
     #: within it ends the settling.
