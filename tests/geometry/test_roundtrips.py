@@ -103,3 +103,18 @@ def test_se2_angle_wraps_and_composes_like_matrices() -> None:
     assert np.isclose(T.theta, -np.pi)
     U = SE2(-0.5, 0.25, 2.0)
     np.testing.assert_allclose((T @ U).as_matrix(), T.as_matrix() @ U.as_matrix(), atol=1e-12)
+
+
+def test_rows_are_the_homogeneous_matrix_and_round_trip_exactly() -> None:
+    """``as_rows``: the 4x4 matrix's rotation block row-major and its translation (checked
+    against ``as_matrix``); ``from_rows`` gives back the same poses bit for bit, one or a batch."""
+    T = SE3.random(np.random.default_rng(3), 5, translation_scale=10.0)
+    rows = T.as_rows()
+    M = T.as_matrix()
+    assert rows.shape == (5, 12)
+    assert np.array_equal(rows[:, :9], M[:, :3, :3].reshape(5, 9))
+    assert np.array_equal(rows[:, 9:], M[:, :3, 3])
+    back = SE3.from_rows(rows)
+    assert np.array_equal(back.as_matrix(), M)
+    one = SE3.from_rows(T[2].as_rows())
+    assert one.as_rows().shape == (12,) and np.array_equal(one.as_matrix(), M[2])

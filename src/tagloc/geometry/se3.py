@@ -154,7 +154,22 @@ class SE3(LieGroup):
         translation = translation_scale * rng.standard_normal(3 if n is None else (n, 3))
         return cls._make(rotation.matrix.copy(), translation)
 
+    @classmethod
+    def from_rows(cls, rows: npt.ArrayLike) -> SE3:
+        """The poses of :meth:`as_rows`' ``(..., 12)`` rows (an exact round trip; unchecked, as
+        :meth:`from_trusted`: for rows this type wrote)."""
+        r = np.asarray(rows, dtype=np.float64)
+        return cls.from_trusted(r[..., :9].reshape(*r.shape[:-1], 3, 3), r[..., 9:12])
+
     # ----- conversions -----------------------------------------------------------------------
+    def as_rows(self) -> FloatArray:
+        """``(12,)`` or ``(N, 12)``: the rotation matrix (row-major) and the translation, for
+        fixed-width numeric storage (:meth:`from_rows` reads them back)."""
+        return np.concatenate(
+            [np.asarray(self.rotation.matrix).reshape(*self.batch_shape, 9), self.translation],
+            axis=-1,
+        )
+
     def as_matrix(self) -> FloatArray:
         """Homogeneous matrices, ``(4, 4)`` or ``(N, 4, 4)`` (a new array)."""
         out = np.zeros((*self.batch_shape, 4, 4))

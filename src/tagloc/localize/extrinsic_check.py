@@ -57,8 +57,6 @@ __all__ = [
     "check_fixes",
     "check_run_extrinsics",
     "odometry_at",
-    "pose_rows",
-    "poses_of",
     "tag_key",
     "thinned",
 ]
@@ -167,17 +165,6 @@ class ExtrinsicCheck:
             },
             "warning": self.warning,
         }  # fmt: skip
-
-
-def pose_rows(T: SE3) -> FloatArray:
-    """``(..., 12)``: each pose's rotation matrix (row-major) and translation."""
-    return np.concatenate([np.asarray(T.rotation.matrix).ravel(), T.translation], axis=-1)
-
-
-def poses_of(rows: FloatArray) -> SE3:
-    """The poses of :func:`pose_rows`' rows."""
-    rows = np.asarray(rows, dtype=np.float64)
-    return SE3.from_trusted(rows[..., :9].reshape(*rows.shape[:-1], 3, 3), rows[..., 9:12])
 
 
 def tag_key(fix: FixAttempt) -> int:

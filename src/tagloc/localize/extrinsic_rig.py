@@ -33,8 +33,6 @@ from tagloc.localize.extrinsic_check import (
     ExtrinsicCheck,
     check_fixes,
     odometry_at,
-    pose_rows,
-    poses_of,
     tag_key,
 )
 from tagloc.localize.extrinsic_relative import (
@@ -69,7 +67,7 @@ class _FixStore:
     def keyed(self) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], SE3]:
         """The stamps, tags and ``T_map_base`` of the fixes held."""
         rows = self.rows[: self.n]
-        return self.stamps[: self.n], rows[:, 61].astype(np.int64), poses_of(rows[:, 1:13])
+        return self.stamps[: self.n], rows[:, 61].astype(np.int64), SE3.from_rows(rows[:, 1:13])
 
     def add(self, stamp_ns: int, row: FloatArray) -> None:
         stamp = np.array([stamp_ns], dtype=np.int64)
@@ -136,15 +134,15 @@ class ExtrinsicRecorder:
                 store = self._stores[output.camera] = _FixStore(self.max_fixes, self._block_s)
             row = np.empty(_ROW)
             row[0] = output.range_m
-            row[1:13] = pose_rows(output.T_map_base)
+            row[1:13] = output.T_map_base.as_rows()
             row[13:49] = np.asarray(output.cov, dtype=np.float64).ravel()
             # the odometry at the fix: between the two samples around its stamp
             i = int(np.searchsorted(self._stamps[: self._m], output.stamp_ns, side="right"))
             near = [max(i - 1, 0), min(i, self._m - 1)]
-            row[49:61] = pose_rows(odometry_at(
-                self._stamps[near], poses_of(self._odom[near]),
+            row[49:61] = odometry_at(
+                self._stamps[near], SE3.from_rows(self._odom[near]),
                 np.array([output.stamp_ns], dtype=np.int64),
-            )[0])  # fmt: skip
+            )[0].as_rows()  # fmt: skip
             row[61] = tag_key(output)
             store.add(output.stamp_ns, row)
 
@@ -162,7 +160,7 @@ class ExtrinsicRecorder:
                 self._stamps = np.resize(self._stamps, size)
                 self._odom = np.resize(self._odom, (size, 12))
         self._stamps[self._m] = e.stamp_ns
-        self._odom[self._m] = pose_rows(e.T_odom_base)
+        self._odom[self._m] = e.T_odom_base.as_rows()
         self._m += 1
 
     def check(
@@ -178,8 +176,8 @@ class ExtrinsicRecorder:
         stamps, rows = store.stamps[: store.n][order], store.rows[: store.n][order]
         options = {"block_s": self._block_s, "max_fixes": self.max_fixes, **options}
         return check_fixes(
-            stamps, rows[:, 0], poses_of(rows[:, 1:13]), rows[:, 13:49].reshape(-1, 6, 6),
-            poses_of(rows[:, 49:61]), T_base_cam, tag_keys=rows[:, 61].astype(np.int64),
+            stamps, rows[:, 0], SE3.from_rows(rows[:, 1:13]), rows[:, 13:49].reshape(-1, 6, 6),
+            SE3.from_rows(rows[:, 49:61]), T_base_cam, tag_keys=rows[:, 61].astype(np.int64),
             camera=camera, **options,
         )  # fmt: skip
 
