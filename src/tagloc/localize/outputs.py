@@ -113,7 +113,8 @@ class RunRecorder:
     unnamed temporary files): the estimate at each odometry sample and the truth as numeric
     rows, the fix attempts, camera frames, events and cab estimates as records. :attr:`fixes`,
     :attr:`frames`, :attr:`events` and :attr:`cab` read the records written so far (read-only
-    sequences); the ladder's moves, the status reports and the cab's moves stay in lists.
+    sequences), the floor at each sample as a code; the ladder's moves, the status reports and
+    the cab's moves stay in lists.
     """
 
     def __init__(self, name: str = "run") -> None:
@@ -130,7 +131,8 @@ class RunRecorder:
         self.ladder: list[LadderTransition] = []
         self.status: list[StatusReport] = []
         self.cab_moves: list[CabTransition] = []
-        self._floors: list[str | None] = []
+        self._floors = RowSpool("floors", 1, np.int32)  # index into _floor_names; -1: None
+        self._floor_names: dict[str, int] = {}
 
     @property
     def fixes(self) -> Sequence[FixAttempt]:
@@ -155,11 +157,13 @@ class RunRecorder:
             est = output.T_map_odom_estimate
             for key, T in (("odom", output.T_odom_base), ("published", output.T_map_odom),
                            ("estimate", output.T_map_odom if est is None else est)):  # fmt: skip
-                self._series[key].append(_pose_row(T))
+                self._series[key].append(T.as_rows())
             self._covs.append((_NAN6 if output.cov_map_base is None else output.cov_map_base)
                               .reshape(36))  # fmt: skip
             self._init.append(output.initialized)
-            self._floors.append(output.floor)
+            floor = output.floor
+            self._floors.append(-1 if floor is None else self._floor_names.setdefault(
+                floor, len(self._floor_names)))  # fmt: skip
         elif isinstance(output, FilterEvent):
             self._records["events"].append(output)
         elif isinstance(output, FixAttempt):
@@ -172,7 +176,7 @@ class RunRecorder:
             self.status.append(output)
         elif isinstance(output, GroundTruthMsg):
             self._truth_stamps.append(output.stamp_ns)
-            self._truth.append(_pose_row(output.T_frame_child))
+            self._truth.append(output.T_frame_child.as_rows())
         elif isinstance(output, CabEstimate):
             self._records["cab"].append(output)
         elif isinstance(output, CabTransition):
@@ -188,7 +192,7 @@ class RunRecorder:
             If a spool does not read back (a short write, a damaged temporary file).
         """
         stamps = self._stamps.read().reshape(-1)
-        poses = {k: _poses(v.read()) for k, v in self._series.items()}
+        poses = {k: SE3.from_rows(v.read()) for k, v in self._series.items()}
         return LocalizationRun(
             name=self.name, stamps_ns=stamps, T_odom_base=poses["odom"],
             T_map_odom=poses["published"], cov_map_base=self._covs.read().reshape(-1, 6, 6),
@@ -196,8 +200,12 @@ class RunRecorder:
             fixes=self.fixes, frames=self.frames, events=self.events,
             metadata=metadata, ladder=list(self.ladder),
             T_map_odom_estimate=poses["estimate"] if len(stamps) else None,
-            cab=self.cab, cab_moves=list(self.cab_moves), floors=list(self._floors),
+            cab=self.cab, cab_moves=list(self.cab_moves), floors=self._floors_read(),
         )  # fmt: skip
+
+    def _floors_read(self) -> list[str | None]:
+        names: list[str | None] = [*self._floor_names, None]  # code -1: the last, None
+        return [names[c] for c in self._floors.read().reshape(-1).tolist()]
 
     def _truth_at(self, stamps: np.ndarray) -> SE3 | None:
         if not len(self._truth):
@@ -210,19 +218,11 @@ class RunRecorder:
         del written
         at = np.searchsorted(keys, stamps).clip(0, len(keys) - 1)
         if np.array_equal(keys[at], stamps):
-            return _poses(rows[at])
+            return SE3.from_rows(rows[at])
         buf = TransformBuffer(window_ns=2**62)
-        buf.set_transforms("truth", "base", keys, _poses(rows))
+        buf.set_transforms("truth", "base", keys, SE3.from_rows(rows))
         inside = (stamps >= keys[0]) & (stamps <= keys[-1])
         if not inside.all():
             return None
         return buf.lookup_many("truth", "base", stamps)
 
-
-def _pose_row(T: SE3) -> FloatArray:
-    return np.concatenate([np.asarray(T.rotation.matrix).reshape(9), T.translation])
-
-
-def _poses(rows: FloatArray) -> SE3:
-    """A batch from ``(N, 12)`` rows of :func:`_pose_row` (an exact round trip)."""
-    return SE3.from_trusted(rows[:, :9].reshape(-1, 3, 3), rows[:, 9:])
