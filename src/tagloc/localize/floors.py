@@ -167,7 +167,11 @@ class FloorFilter(MapOdomFilter):
         h = self.floors.lower_height(fix.source)
         if h == 0.0 and fix is given:
             return super().update(fix)
-        lowered = dataclasses.replace(fix, T_map_base=self.floors.lift(fix.T_map_base, -h))
+        lowered = (
+            fix
+            if h == 0.0
+            else dataclasses.replace(fix, T_map_base=self.floors.lift(fix.T_map_base, -h))
+        )
         self._given[id(lowered)] = (lowered, given)
         while len(self._given) > _REMEMBERED:
             self._given.popitem(last=False)

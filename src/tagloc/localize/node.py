@@ -57,8 +57,9 @@ from tagloc.localize.fix import LocalizeError
 from tagloc.localize.fusion import Fusion
 from tagloc.localize.motion import CALIBRATION_PARAMETERS
 from tagloc.localize.outputs import NodeOutput, OutputSink
+from tagloc.localize.realtime_worker import FrameDetect
 from tagloc.localize.registry import build_fix_sources
-from tagloc.localize.source_tags import FrameDetect, TagSource
+from tagloc.localize.source_tags import TagSource
 from tagloc.localize.sources import Arrival, FixContext, FixSource, SkipCounter, SourceInputs
 from tagloc.localize.tag_cameras import NodeCamera
 from tagloc.localize.work_queue import WorkQueue

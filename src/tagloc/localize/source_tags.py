@@ -34,6 +34,7 @@ from tagloc.geometry import SE3
 from tagloc.localize.config import LocalizerConfig
 from tagloc.localize.fiducial import E_Z, FiducialFixSource, FrameFixes
 from tagloc.localize.fix import LocalizeError
+from tagloc.localize.realtime_worker import Fixer, FrameDetect
 from tagloc.localize.roi_detector import RegionDetector, RegionStats, region_detector
 from tagloc.localize.run import CameraFrameRecord, FixAttempt
 from tagloc.localize.sources import (
@@ -59,13 +60,6 @@ MARKERS = "markers"
 _MAX_PENDING = 900
 _NAN6 = np.full((6, 6), np.nan)
 _NAN6.flags.writeable = False
-
-#: ``fixer(stamp_ns, detections)``: a frame's fixes, formed off the node's thread.
-Fixer = Callable[[int, tuple[TagDetection, ...]], FrameFixes]
-#: ``detect(image, detector)``: a frame's detections in its predicted regions, off the node's
-#: thread.
-FrameDetect = Callable[[npt.NDArray[np.generic], TagDetector], list[TagDetection]]
-
 
 @dataclass(frozen=True, slots=True)
 class _Frame:
