@@ -5,7 +5,7 @@ same base (turned 180 deg about the base's z, its frames at the same instants). 
 projected here with OpenCV (``cv2.projectPoints`` of the map's tag corners from the simulator's
 true pose, 0.3 px noise), not with tagloc's camera model. Oracles: OpenCV's ``solvePnP``
 (IPPE-square, refined) on each back frame's single tag composed with the extrinsics, and the
-simulator's truth.
+simulator's truth. The rig's stream is built in ``tests/rig_stream.py``.
 """
 
 from __future__ import annotations
@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from list_sink import ListSink
 
+from rig_stream import BACK, UNIT, Rig, make_rig, matrix
 from tagloc.eval.refusals import fix_decisions
 from tagloc.eval.scenarios import calibrated_config, scenario_config
 from tagloc.geometry import SE3
@@ -22,67 +23,8 @@ from tagloc.localize import LocalizeError
 from tagloc.localize.node import LocalizerNode, NodeCamera
 from tagloc.localize.outputs import Estimate
 from tagloc.localize.run import FixAttempt
-from tagloc.messages import Message, TagDetectionsMsg
-from tagloc.sim.scenarios import ScenarioSource, build_scenario
-from tagloc.tags import TagDetection
-
-BACK = "/back/tags"
-#: Tag corners in the tag frame (x right, y up): top-left, top-right, bottom-right, bottom-left.
-UNIT = np.array([[-0.5, 0.5, 0.0], [0.5, 0.5, 0.0], [0.5, -0.5, 0.0], [-0.5, -0.5, 0.0]])
-
-
-Rig = tuple[ScenarioSource, SE3, dict[int, list[TagDetection]], list[tuple[str, Message]]]
-
-
-def _matrix(T: SE3) -> np.ndarray:
-    M = np.eye(4)
-    M[:3, :3], M[:3, 3] = T.rotation.as_matrix(), np.asarray(T.translation)
-    return M
-
-
-def make_rig(duration_s: float = 40.0) -> Rig:
-    """The scenario, the back camera's mount, its detections by stamp, and the merged stream."""
-    source = ScenarioSource(build_scenario("default", seed=1, duration_s=duration_s))
-    cam = source.camera
-    turn = SE3.from_trusted(np.diag([-1.0, -1.0, 1.0]), np.zeros(3))
-    T_base_back = turn @ source.T_base_cam
-    K, D = np.asarray(cam.K), np.asarray(cam.dist_coeffs, dtype=np.float64)
-    stamps = np.array([f.stamp_ns for f in source.frames], dtype=np.int64)
-    truth = source.scenario.drive.ground_truth_at(stamps).T_map_base
-    rng = np.random.default_rng(7)
-    tags = source.scenario.tag_map.in_frame("map")
-    back: dict[int, list[TagDetection]] = {}
-    for k, stamp in enumerate(stamps.tolist()):
-        T_cam_map = np.linalg.inv(_matrix(truth[k]) @ _matrix(T_base_back))
-        dets = []
-        for tag in tags:
-            pts = (_matrix(tag.T_frame_tag()) @ np.c_[tag.size * UNIT, np.ones(4)].T).T[:, :3]
-            cam_pts = (T_cam_map[:3, :3] @ pts.T).T + T_cam_map[:3, 3]
-            normal = T_cam_map[:3, :3] @ tag.T_frame_tag().rotation.as_matrix()[:, 2]
-            centre = cam_pts.mean(axis=0)
-            angle = np.degrees(np.arccos(-normal @ centre / np.linalg.norm(centre)))
-            if centre[2] < 0.3 or np.linalg.norm(centre) > 6.0 or angle > 65.0:
-                continue
-            px, _ = cv2.projectPoints(pts, cv2.Rodrigues(T_cam_map[:3, :3])[0], T_cam_map[:3, 3],
-                                      K, D)  # fmt: skip
-            px = px.reshape(4, 2) + rng.normal(0.0, 0.3, (4, 2))
-            if (
-                (px < 5).any()
-                or (px[:, 0] > cam.width - 5).any()
-                or (px[:, 1] > cam.height - 5).any()
-            ):
-                continue
-            dets.append(TagDetection.from_corners(tag.id, tag.family, px))
-        if dets:
-            back[stamp] = dets
-    stream: list[tuple[str, Message]] = []
-    for topic, msg in source:
-        stream.append((topic, msg))
-        if isinstance(msg, TagDetectionsMsg) and msg.stamp_ns in back:
-            stream.append(
-                (BACK, TagDetectionsMsg(msg.stamp_ns, "back_optical", tuple(back[msg.stamp_ns])))
-            )
-    return source, T_base_back, back, stream
+from tagloc.messages import Message
+from tagloc.sim.scenarios import ScenarioSource
 
 
 @pytest.fixture(scope="module")
@@ -142,7 +84,7 @@ def test_back_fixes_agree_with_opencv_solvepnp(rig: Rig) -> None:
     cam = source.camera
     K, D = np.asarray(cam.K), np.asarray(cam.dist_coeffs, dtype=np.float64)
     tag_map = {t.id: t for t in source.scenario.tag_map.in_frame("map")}
-    X_inv = np.linalg.inv(_matrix(T_base_back))
+    X_inv = np.linalg.inv(matrix(T_base_back))
     checked = 0
     for a in sink.of(FixAttempt):
         if a.camera != "back" or not a.accepted or len(back[a.stamp_ns]) != 1:
@@ -158,7 +100,7 @@ def test_back_fixes_agree_with_opencv_solvepnp(rig: Rig) -> None:
             rvec, tvec = cv2.solvePnPRefineLM(obj, px, K, D, rvec, tvec)
             T_cam_tag = np.eye(4)
             T_cam_tag[:3, :3], T_cam_tag[:3, 3] = cv2.Rodrigues(rvec)[0], tvec.ravel()
-            T_map_base = _matrix(tag.T_frame_tag()) @ np.linalg.inv(T_cam_tag) @ X_inv
+            T_map_base = matrix(tag.T_frame_tag()) @ np.linalg.inv(T_cam_tag) @ X_inv
             gap = np.linalg.norm(T_map_base[:3, 3] - np.asarray(a.T_map_base.translation))
             best = gap if best is None else min(best, gap)
         assert best is not None and best < 0.005  # one of OpenCV's branches, to 5 mm

@@ -19,7 +19,7 @@ if TYPE_CHECKING:
     from tagloc.localize.node import NodeCamera, NodeTopics
     from tagloc.tags import TagMap
 
-__all__ = ["BagCamera", "bag_camera", "bag_cameras", "check_bag_camera"]
+__all__ = ["BagCamera", "bag_camera", "bag_cameras", "check_bag_camera", "check_cameras"]
 
 # The options both commands take, one definition each (parameter names give the option names).
 CamerasOpt = Annotated[Path | None, typer.Option(help="Kalibr camchain yaml.")]
@@ -152,3 +152,23 @@ def check_bag_camera(
             "refusing before any fix"
         )
     return found.to_dict()
+
+
+def check_cameras(
+    bag: Path, rig: tuple[NodeCamera, ...], camera: CameraModel | None, T_base_cam: SE3 | None,
+    tag_map: TagMap, roles: NodeTopics, corner_order: str, family: str,
+) -> dict[str, object] | None:  # fmt: skip
+    """Each camera's model against the bag's first frames (one line naming the camera that does
+    not fit, before any fix): the one camera's result, or ``{camera: result}`` of a rig."""
+    import dataclasses
+
+    if not rig:
+        return None if camera is None else check_bag_camera(
+            bag, camera, T_base_cam, tag_map, roles, corner_order, family)  # fmt: skip
+    out: dict[str, object] = {}
+    for c in rig:
+        assert c.camera is not None
+        own = dataclasses.replace(roles, detections=c.detections_topic)
+        out[c.name] = check_bag_camera(bag, c.camera, c.T_base_cam, tag_map, own, corner_order,
+                                       family, name=c.name)  # fmt: skip
+    return out

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import functools
 import inspect
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -90,10 +90,12 @@ def with_bag_inputs(command: Callable[..., Any]) -> Callable[..., Any]:
 
 
 def bag_topics_to_read(
-    bag: Path, topics: NodeTopics, corner_order: str, family: str, *, truth: bool = True
-) -> list[str]:
+    bag: Path, topics: NodeTopics, corner_order: str, family: str, *, truth: bool = True,
+    rig_topics: Collection[str] = (),
+) -> list[str]:  # fmt: skip
     """The node's topics present in ``bag`` (with every ``tf_static``; the ground truth unless
-    ``truth`` is false); one line if it has no odometry or no camera frames."""
+    ``truth`` is false; the tag topics of a rig's cameras, ``rig_topics``); one line if it has no
+    odometry or no camera frames."""
     from tagloc.io import BagSource
     from tagloc.localize import LocalizeError
 
@@ -102,10 +104,11 @@ def bag_topics_to_read(
     if topics.odom not in present and topics.tf not in present:
         raise LocalizeError(f"{bag}: no odometry: neither {topics.odom!r} nor {topics.tf!r} is in "
                             f"the bag (topics: {names})")  # fmt: skip
-    if topics.detections not in present and topics.image not in present:
+    rig = [t for t in rig_topics if t in present]
+    if not rig and topics.detections not in present and topics.image not in present:
         raise LocalizeError(f"{bag}: no camera frames: neither {topics.detections!r} nor "
                             f"{topics.image!r} is in the bag (topics: {names})")  # fmt: skip
     roles = (topics.odom, topics.detections, topics.image, topics.camera_info, topics.tf)
-    wanted = [t for t in (*roles, *((topics.truth,) if truth else ())) if t in present]
+    wanted = [t for t in (*roles, *((topics.truth,) if truth else ()), *rig) if t in present]
     wanted += [t for t in present if t.rstrip("/").endswith("tf_static")]
     return sorted(set(wanted))

@@ -84,7 +84,7 @@ def eval_bag(
     repeatability, fix acceptance by conditions, the camera's extrinsics."""
     from rich.progress import Progress
 
-    from tagloc.cli.bag_camera import bag_camera, check_bag_camera
+    from tagloc.cli.bag_camera import bag_camera, bag_cameras, check_cameras
     from tagloc.cli.engine_opts import make_engine
     from tagloc.config import read_text_file
     from tagloc.eval.onsite import held_out_tags
@@ -93,10 +93,11 @@ def eval_bag(
     from tagloc.eval.onsite_report import ONSITE_FILES, onsite_summary, write_onsite_report
     from tagloc.eval.refusals import fix_decisions
     from tagloc.fileutil import check_outputs
+    from tagloc.io import BagSource
     from tagloc.io.bag_stream import BagStream
     from tagloc.localize import LocalizeError, driver, load_localizer_config
     from tagloc.localize.config import LocalizerConfig
-    from tagloc.localize.extrinsic_check import check_run_extrinsics
+    from tagloc.localize.extrinsic_rig import ExtrinsicRecorder
     from tagloc.localize.node import LocalizerNode
     from tagloc.localize.outputs import RunRecorder
     from tagloc.tags import load_tag_map, make_detector
@@ -117,24 +118,25 @@ def eval_bag(
     if unknown:
         raise LocalizeError(f"--hold-out {unknown[0]}: no tag {family}:{unknown[0]} in {tags}")
     topics = bag_inputs.topics()
-    camera, T_base_cam = bag_camera(cam)
-    wanted = bag_topics_to_read(bag, topics, cam.corner_order, family, truth=False)
-    camera_check = None
-    if camera is not None:
-        camera_check = check_bag_camera(bag, camera, T_base_cam, tag_map, topics,
-                                        cam.corner_order, family)  # fmt: skip
+    present = BagSource(bag, corner_order=cam.corner_order, default_family=family).bag_topics
+    rig = bag_cameras(cam, present)  # every camera on its tag topic, or none
+    camera, T_base_cam = (None, None) if rig else bag_camera(cam)
+    wanted = bag_topics_to_read(bag, topics, cam.corner_order, family, truth=False,
+                                rig_topics=[c.detections_topic for c in rig])  # fmt: skip
+    camera_check = check_cameras(bag, rig, camera, T_base_cam, tag_map, topics,
+                                 cam.corner_order, family)  # fmt: skip
     stream = BagStream(bag, tuple(wanted), cam.corner_order, family)
 
     engine = None if no_hold_out else make_engine(jobs, ray)  # a bad --ray before any work
     has_images = topics.image in wanted
     tap = _ImageTap(topics.image, make_detector(cfg.tags.backend, family) if has_images else None)
-    recorder = RunRecorder(bag.name)
+    recorder, extrinsics = RunRecorder(bag.name), ExtrinsicRecorder()
     node = partial(LocalizerNode, tag_map, cfg, camera=camera, T_base_cam=T_base_cam,
-                   topics=topics)  # fmt: skip
-    result = driver.run(node, tap(stream()), [recorder])
+                   topics=topics, cameras=rig)  # fmt: skip
+    result = driver.run(node, tap(stream()), [recorder, extrinsics])
     run = recorder.run(result.node.metadata())
-    X = result.node.T_base_cam
-    ext = None if X is None else check_run_extrinsics(run, X)
+    verdicts, rig_line = extrinsics.verdicts(result.node.T_base_cam_by_camera)
+    ext = next(iter(verdicts.values()), None)
     stops = detect_stops(run, min_stop_s=min_stop)
     spreads = checkpoint_spreads(stops, spots)
     acceptance = acceptance_by_conditions(run.fixes, tap.measures if tap.images else None)
@@ -147,7 +149,7 @@ def eval_bag(
                 held = held_out_tags(
                     stream, tag_map, cfg, tag_ids=ids, camera=camera, T_base_cam=T_base_cam,
                     topics=topics, family=family, max_range_m=max_range, engine=engine,
-                    progress=lambda done, n: bar.update(task, completed=done),
+                    progress=lambda done, n: bar.update(task, completed=done), cameras=rig,
                 )  # fmt: skip
         finally:
             engine.close()
@@ -162,7 +164,8 @@ def eval_bag(
         bag.name, held, stops, spreads, acceptance,
         checkpoints_from=str(checkpoints) if checkpoints else f"stops >= {min_stop:g} s",
         extrinsic_check=None if ext is None else ext.to_dict(), camera_check=camera_check,
-        run_facts=facts,
+        run_facts=facts, extrinsic_rig=rig_line,
+        extrinsic_by_camera={n: v.to_dict() for n, v in verdicts.items()} if rig else None,
     )  # fmt: skip
     write_onsite_report(summary, held, stops, out, run)
     from tagloc.eval.onsite_report import summary_lines

@@ -37,13 +37,11 @@ from tagloc.fileutil import check_outputs
 if TYPE_CHECKING:
     import numpy as np
 
-    from tagloc.camera import CameraModel
     from tagloc.cli.bag_camera import BagCamera
-    from tagloc.geometry import SE3
     from tagloc.io import BagTopic
     from tagloc.localize.config import LocalizerConfig
     from tagloc.localize.extrinsic_relative import RigVerdict
-    from tagloc.localize.node import LocalizerNode, NodeCamera, NodeTopics
+    from tagloc.localize.node import LocalizerNode
     from tagloc.localize.outputs import OutputSink
     from tagloc.messages import Message
     from tagloc.tags import TagMap
@@ -311,7 +309,7 @@ def _bag_node(
     topics: tuple[str, ...], premap: np.ndarray | None = None, *, live: bool = False,
     duration: float | None = None,
 ) -> WiredNode:  # fmt: skip
-    from tagloc.cli.bag_camera import bag_camera, bag_cameras
+    from tagloc.cli.bag_camera import bag_camera, bag_cameras, check_cameras
     from tagloc.io import BagSource
     from tagloc.localize import LocalizeError
     from tagloc.localize.config import LocalizerConfig
@@ -339,7 +337,7 @@ def _bag_node(
             f"{bag}: no camera frames: neither {roles.detections!r} nor {roles.image!r} is in "
             f"the bag (topics: {', '.join(sorted(source.bag_topics)) or 'none'})"
         )
-    checked = _check_cameras(bag, rig, camera, T_base_cam, tag_map, roles, cam.corner_order,
+    checked = check_cameras(bag, rig, camera, T_base_cam, tag_map, roles, cam.corner_order,
                              family)  # fmt: skip
     wanted = [t for t in topics if t in source.bag_topics]
     wanted += [c.detections_topic for c in rig]
@@ -357,28 +355,6 @@ def _bag_node(
     stream = source if duration is None else _FirstSeconds(source, duration)
     return WiredNode(config, node, stream, bag.name, checked, tag_map, premap, skipped,
                      tuple(c.name for c in rig))  # fmt: skip
-
-
-def _check_cameras(
-    bag: Path, rig: tuple[NodeCamera, ...], camera: CameraModel | None, T_base_cam: SE3 | None,
-    tag_map: TagMap, roles: NodeTopics, corner_order: str, family: str,
-) -> dict[str, object] | None:  # fmt: skip
-    """Each camera's model against the bag's first frames (one line naming the camera that does
-    not fit, before any fix): the one camera's result, or ``{camera: result}`` of a rig."""
-    import dataclasses
-
-    from tagloc.cli.bag_camera import check_bag_camera
-
-    if not rig:
-        return None if camera is None else check_bag_camera(
-            bag, camera, T_base_cam, tag_map, roles, corner_order, family)  # fmt: skip
-    out: dict[str, object] = {}
-    for c in rig:
-        assert c.camera is not None
-        own = dataclasses.replace(roles, detections=c.detections_topic)
-        out[c.name] = check_bag_camera(bag, c.camera, c.T_base_cam, tag_map, own, corner_order,
-                                       family, name=c.name)  # fmt: skip
-    return out
 
 
 def _lidar_not_point_clouds(bag: Path, info: BagTopic | None, topic: str, premap: bool) -> int:

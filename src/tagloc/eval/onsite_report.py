@@ -37,10 +37,16 @@ def onsite_summary(
     spreads: list[CheckpointSpread], acceptance: dict[str, Any], *,
     checkpoints_from: str, extrinsic_check: dict[str, Any] | None,
     camera_check: dict[str, Any] | None, run_facts: dict[str, Any],
+    extrinsic_by_camera: dict[str, dict[str, Any] | None] | None = None,
+    extrinsic_rig: str | None = None,
 ) -> dict[str, Any]:  # fmt: skip
-    """One JSON-ready dict of the on-site evaluation, with its verdict (:func:`onsite_verdict`)."""
-    passed, why = onsite_verdict(held_out, extrinsic_check)
-    return {
+    """One JSON-ready dict of the on-site evaluation, with its verdict (:func:`onsite_verdict`).
+    On a rig, ``extrinsic_by_camera`` holds each camera's mounting check (``extrinsic_check``
+    the first camera's) and ``extrinsic_rig`` their relative mounting."""
+    passed, why = onsite_verdict(held_out, extrinsic_check, extrinsic_by_camera)
+    rig = {} if not extrinsic_by_camera else {
+        "extrinsic_check_by_camera": extrinsic_by_camera, "extrinsic_check_rig": extrinsic_rig}
+    return {**rig,
         "name": name, "run": run_facts,
         "held_out_tags": None if held_out is None else held_out.to_dict(),
         "checkpoints": {"from": checkpoints_from, "stops": len(stops),
@@ -55,11 +61,18 @@ HELD_OUT_P95_M = 0.10
 
 
 def onsite_verdict(
-    held_out: HeldOutResult | None, extrinsic_check: dict[str, Any] | None
-) -> tuple[bool | None, str]:
+    held_out: HeldOutResult | None, extrinsic_check: dict[str, Any] | None,
+    by_camera: dict[str, dict[str, Any] | None] | None = None,
+) -> tuple[bool | None, str]:  # fmt: skip
     """Pass when the held-out tags' position error p95 is within :data:`HELD_OUT_P95_M` and the
-    extrinsic check raised no warning; None (no verdict) when no held-out tag was seen."""
-    warning = (extrinsic_check or {}).get("warning")
+    extrinsic check (of every camera of a rig, ``by_camera``) raised no warning; None (no
+    verdict) when no held-out tag was seen."""
+    warning: str | None
+    if by_camera:
+        warning = "; ".join(f"camera {n}: {c['warning']}" for n, c in by_camera.items()
+                            if c and c.get("warning"))  # fmt: skip
+    else:
+        warning = (extrinsic_check or {}).get("warning")
     if held_out is None or not held_out.observations:
         if warning:
             return False, str(warning)
@@ -93,6 +106,10 @@ def summary_lines(summary: dict[str, Any]) -> list[str]:
                 f"{tag:>8} {p['n']:>6} {_f(p['median'], 100):>11} {_f(p['p95'], 100):>11} "
                 f"{_f(y['median'], 1, 2):>12} {_f(y['p95'], 1, 2):>12}"
             )
+        for camera, s in ho.get("per_camera", {}).items():
+            p = s["position_m"]
+            lines.append(f"  camera {camera}: {p['n']} views, position median "
+                         f"{_f(p['median'], 100)} cm, p95 {_f(p['p95'], 100)} cm")  # fmt: skip
         if ho["unseen_tags"]:
             lines.append(f"held out but never seen near: {ho['unseen_tags']}")
     cp = summary["checkpoints"]
@@ -115,15 +132,19 @@ def summary_lines(summary: dict[str, Any]) -> list[str]:
             lines.append(f"  by {key}: " + ", ".join(
                 f"[{b['lo']:g}, {b['hi']:g}) {unit} {b['accepted']}/{b['attempts']}"
                 for b in bins))  # fmt: skip
-    ext = summary["extrinsic_check"]
-    if ext is not None:
+    checks = summary.get("extrinsic_check_by_camera") or {"": summary["extrinsic_check"]}
+    for camera, ext in checks.items():
+        if ext is None:
+            continue
         lines.append(
-            f"extrinsic check: {ext['rotation_deg']:.2f} deg / {ext['translation_m'] * 100:.1f} "
-            f"cm from {ext['n_pairs']} fix pairs (unobservable: "
+            f"extrinsic check{f' {camera}' if camera else ''}: {ext['rotation_deg']:.2f} deg / "
+            f"{ext['translation_m'] * 100:.1f} cm from {ext['n_pairs']} fix pairs (unobservable: "
             f"{', '.join(ext['unobservable']) or 'none'})"
         )
         if ext["warning"]:
             lines.append(f"WARNING: {ext['warning']}")
+    if summary.get("extrinsic_check_rig"):
+        lines.append(f"rig: {summary['extrinsic_check_rig']}")
     v = summary.get("verdict")
     if v is not None:
         word = {True: "PASS", False: "FAIL", None: "NO VERDICT"}[v["passed"]]
