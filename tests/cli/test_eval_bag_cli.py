@@ -99,7 +99,8 @@ def test_dupont_camera_passes_the_check(tmp_path: Path) -> None:
               str(DUPONT / "camera_poses.yaml"), "--tagslam", str(DUPONT / "tagslam.yaml"),
               "--corner-order", "bl_br_tr_tl", "--odom-topic", "/fla/vio/odom"]  # fmt: skip
     tags = tmp_path / "tags.yaml"
-    done = run_tagloc("map", "build", "--bag", str(bag), *common, "--out", str(tags))
+    done = run_tagloc("map", "build", "--bag", str(bag), *common, "--config",
+                      str(REPO / "docs" / "dupont_map.yaml"), "--out", str(tags))  # fmt: skip
     assert done.returncode == 0, done.stderr
     out = tmp_path / "loc"
     done = run_tagloc("localize", str(bag), "--tags", str(tags), *common, "--detections-topic",
